@@ -1,0 +1,201 @@
+"""Recursive Newton-Euler inverse dynamics and the mass matrix (paper eq. 10-14).
+
+The joint damping ``D qd`` is kept as a separate, explicit term (paper eq. 1), so
+``rnea(q, qd, qdd) = M(q) qdd + h(q, qd) + g(q)`` and ``bias_forces(q, qd) = rnea(q, qd, 0)``.
+
+Two routes to M:
+- :func:`mass_matrix_rnea`: the paper's route, column i = INV(q, 0, e_i, 0) (eq. 14);
+- :func:`mass_matrix` (CRBA): composite bodies, M[i, j] = Io_j + m_j^c (o_j - o_i).(c_j^c - o_j)
+  for i <= j, where body j^c is links j..5 and Io_j its inertia about joint j.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from .kinematics import _vec6, nb_forward_pass
+from .model import (
+    COL_COM,
+    COL_INERTIA,
+    COL_MASS,
+    COL_NEXT,
+    N_LINKS,
+    SC_GRAVITY,
+    ChainModel,
+)
+
+
+@njit(cache=True)
+def nb_rnea_full(ch, q, qd, qdd, g, ext_link, ext_s, ext_f):
+    """Inverse dynamics with the joint wrenches (paper eq. 11, damping excluded).
+
+    Args:
+        ch: (6, 6) packed chain. q, qd, qdd: (6,) [rad, rad/s, rad/s^2].
+        g: gravity [m/s^2] (0 to leave it out).
+        ext_link, ext_s, ext_f: an external force ext_f (2,) [N] applied at offset ext_s [m] on
+            link ext_link (ext_link < 0: none), e.g. a ground contact.
+
+    Returns:
+        tau (6,): joint torques [N m] that produce qdd;
+        f (6, 2): force on link i from link i-1 at joint i (i = 0: from the ground) [N];
+        n (6,): moment on link i from link i-1 about joint i [N m] (n = tau).
+    """
+    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, qd, qdd, 0.0, g)
+    f = np.zeros((N_LINKS, 2))
+    n = np.zeros(N_LINKS)
+    fny = 0.0
+    fnz = 0.0
+    nn = 0.0
+    for i in range(N_LINKS - 1, -1, -1):
+        c = np.cos(phi[i])
+        s = np.sin(phi[i])
+        rcy = ch[i, COL_COM] * c
+        rcz = ch[i, COL_COM] * s
+        m = ch[i, COL_MASS]
+        acy = ao[i, 0] - al[i] * rcz - w[i] * w[i] * rcy
+        acz = ao[i, 1] + al[i] * rcy - w[i] * w[i] * rcz
+        fy = m * acy + fny
+        fz = m * acz + fnz
+        mom = ch[i, COL_INERTIA] * al[i] + rcy * m * acz - rcz * m * acy + nn
+        if i < N_LINKS - 1:
+            rny = ch[i, COL_NEXT] * c
+            rnz = ch[i, COL_NEXT] * s
+            mom += rny * fnz - rnz * fny
+        if i == ext_link:
+            rey = ext_s * c
+            rez = ext_s * s
+            fy -= ext_f[0]
+            fz -= ext_f[1]
+            mom -= rey * ext_f[1] - rez * ext_f[0]
+        f[i, 0] = fy
+        f[i, 1] = fz
+        n[i] = mom
+        fny = fy
+        fnz = fz
+        nn = mom
+    return n.copy(), f, n
+
+
+@njit(cache=True)
+def nb_rnea(ch, q, qd, qdd, g):
+    """Joint torques [N m] (6,) = M qdd + h + g(q) (no damping, no external force)."""
+    return nb_rnea_full(ch, q, qd, qdd, g, -1, 0.0, np.zeros(2))[0]
+
+
+@njit(cache=True)
+def nb_mass_matrix_rnea(ch, q):
+    """(6, 6) mass matrix, column i = INV(q, 0, e_i, 0) (paper eq. 14)."""
+    z = np.zeros(N_LINKS)
+    M = np.empty((N_LINKS, N_LINKS))
+    for i in range(N_LINKS):
+        e = np.zeros(N_LINKS)
+        e[i] = 1.0
+        M[:, i] = nb_rnea(ch, q, z, e, 0.0)
+    return M
+
+
+@njit(cache=True)
+def nb_mass_matrix(ch, q):
+    """(6, 6) mass matrix by the composite-rigid-body algorithm (O(n^2), one pass)."""
+    z = np.zeros(N_LINKS)
+    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, z, z, 0.0, 0.0)
+    # Composite body j = links j..5: mass, first moment (for its COM) and inertia about o_j.
+    cm = 0.0
+    sy = 0.0
+    sz = 0.0
+    ic = 0.0  # sum of I_k + m_k |c_k|^2 about the world origin
+    mc = np.empty(N_LINKS)
+    ccy = np.empty(N_LINKS)
+    ccz = np.empty(N_LINKS)
+    io = np.empty(N_LINKS)
+    for j in range(N_LINKS - 1, -1, -1):
+        m = ch[j, COL_MASS]
+        cy = o[j, 0] + ch[j, COL_COM] * np.cos(phi[j])
+        cz = o[j, 1] + ch[j, COL_COM] * np.sin(phi[j])
+        cm += m
+        sy += m * cy
+        sz += m * cz
+        ic += ch[j, COL_INERTIA] + m * (cy * cy + cz * cz)
+        mc[j] = cm
+        ccy[j] = sy / cm
+        ccz[j] = sz / cm
+        # parallel-axis shift from the origin to o_j
+        io[j] = ic - 2.0 * (o[j, 0] * sy + o[j, 1] * sz) + cm * (o[j, 0] ** 2 + o[j, 1] ** 2)
+    M = np.empty((N_LINKS, N_LINKS))
+    for j in range(N_LINKS):
+        ey = ccy[j] - o[j, 0]
+        ez = ccz[j] - o[j, 1]
+        for i in range(j + 1):
+            v = io[j] + mc[j] * ((o[j, 0] - o[i, 0]) * ey + (o[j, 1] - o[i, 1]) * ez)
+            M[i, j] = v
+            M[j, i] = v
+    return M
+
+
+class RneaResult(NamedTuple):
+    """Intermediates of one Newton-Euler pass (see :func:`rnea_full`)."""
+
+    tau: np.ndarray
+    """(6,) joint torques [N m] (damping excluded)."""
+    joint_force: np.ndarray
+    """(6, 2) force on link i from link i-1 at joint i [N] (row 0: from the ground)."""
+    joint_moment: np.ndarray
+    """(6,) moment on link i from link i-1 about joint i [N m]."""
+
+
+def rnea_full(
+    chain: ChainModel,
+    q,
+    qd,
+    qdd,
+    *,
+    gravity: bool = True,
+    ext_link: int = -1,
+    ext_offset_m: float = 0.0,
+    ext_force_n=(0.0, 0.0),
+) -> RneaResult:
+    """Newton-Euler inverse dynamics with joint wrenches (paper eq. 11-12).
+
+    Args:
+        chain: the chain in the current numbering.
+        q, qd, qdd: (6,) joint angles [rad], rates [rad/s], accelerations [rad/s^2].
+        gravity: include gravity (the ``g`` argument of the paper's INV).
+        ext_link: link carrying an external force (-1: none).
+        ext_offset_m: offset of its point of application along the link [m].
+        ext_force_n: (2,) external force (y, z) [N].
+    """
+    g = chain.packed_scalars[SC_GRAVITY] if gravity else 0.0
+    ext = np.asarray(ext_force_n, dtype=np.float64)
+    tau, f, n = nb_rnea_full(
+        chain.packed, _vec6("q", q), _vec6("qd", qd), _vec6("qdd", qdd), g,
+        int(ext_link), float(ext_offset_m), ext,
+    )
+    return RneaResult(tau, f, n)
+
+
+def rnea(chain: ChainModel, q, qd, qdd, *, gravity: bool = True) -> np.ndarray:
+    """(6,) joint torques [N m] = M(q) qdd + h(q, qd) + g(q) (damping excluded)."""
+    return rnea_full(chain, q, qd, qdd, gravity=gravity).tau
+
+
+def bias_forces(chain: ChainModel, q, qd) -> np.ndarray:
+    """(6,) bias b = INV(q, qd, 0, g) = h(q, qd) + g(q) [N m] (paper eq. 13, damping excluded)."""
+    return rnea(chain, q, qd, np.zeros(N_LINKS))
+
+
+def mass_matrix_rnea(chain: ChainModel, q) -> np.ndarray:
+    """(6, 6) M(q) [kg m^2], column by column with unit accelerations (paper eq. 14)."""
+    return nb_mass_matrix_rnea(chain.packed, _vec6("q", q))
+
+
+def mass_matrix(chain: ChainModel, q) -> np.ndarray:
+    """(6, 6) M(q) [kg m^2] by the composite-rigid-body algorithm (the fast route)."""
+    return nb_mass_matrix(chain.packed, _vec6("q", q))
+
+
+def damping_matrix(chain: ChainModel) -> np.ndarray:
+    """(6, 6) diagonal joint damping D [N m s/rad] (joint 0 = toe pivot)."""
+    return np.diag(np.asarray(chain.joint_damping_nms_per_rad, dtype=np.float64))

@@ -1,0 +1,92 @@
+"""Time integrators as data: one signature, consumed by the compiled stepping loop.
+
+Each integrator is an explicit Runge-Kutta tableau ``(A, b)`` applied to the second-order
+system ``d/dt (q, qd) = (qd, qdd(q, qd))``, except the semi-implicit Euler, whose velocity
+update treats the joint damping implicitly: it solves ``(M + h D) qdd = tau - b - D qd + ...``
+then ``qd' = qd + h qdd`` and ``q' = q + h qd'`` (the implicit-damping Euler of MJX).
+
+``STABILITY_CONSTANT`` is the real-axis stability limit ``h lambda`` of each method for the
+linear damping mode ``qdd = -lambda qd``: 2 for explicit Euler and RK2, about 2.785 for RK4,
+unbounded for the semi-implicit method (its damping update is unconditionally stable).
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+import numpy as np
+
+
+class Integrator(IntEnum):
+    """Integration method per substep (values are the compiled core's codes)."""
+
+    EULER = 0
+    """Explicit Euler, first order (the paper's)."""
+    SEMI_IMPLICIT = 1
+    """Semi-implicit Euler with implicit joint damping, first order (default family)."""
+    RK2 = 2
+    """Explicit midpoint, second order."""
+    RK4 = 3
+    """Classical Runge-Kutta, fourth order."""
+
+
+_TABLEAUS: dict[Integrator, tuple[list[list[float]], list[float]]] = {
+    Integrator.EULER: ([[0.0]], [1.0]),
+    Integrator.SEMI_IMPLICIT: ([[0.0]], [1.0]),  # unused: handled by its own update rule
+    Integrator.RK2: ([[0.0, 0.0], [0.5, 0.0]], [0.0, 1.0]),
+    Integrator.RK4: (
+        [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+        [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
+    ),
+}
+
+MAX_STAGES = 4
+"""Largest number of stages of any tableau here."""
+
+ORDER: dict[Integrator, int] = {
+    Integrator.EULER: 1,
+    Integrator.SEMI_IMPLICIT: 1,
+    Integrator.RK2: 2,
+    Integrator.RK4: 4,
+}
+"""Global order of accuracy of each method."""
+
+STABILITY_CONSTANT: dict[Integrator, float] = {
+    Integrator.EULER: 2.0,
+    Integrator.SEMI_IMPLICIT: float("inf"),
+    Integrator.RK2: 2.0,
+    Integrator.RK4: 2.785293563405282,
+}
+"""Largest stable h * lambda on the negative real axis (lambda: eigenvalue of M^-1 D)."""
+
+EVALS_PER_STEP: dict[Integrator, int] = {
+    Integrator.EULER: 1,
+    Integrator.SEMI_IMPLICIT: 1,
+    Integrator.RK2: 2,
+    Integrator.RK4: 4,
+}
+"""Constrained dynamics evaluations per integration step."""
+
+
+def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:
+    """(A (4, 4), b (4,)) zero-padded explicit Runge-Kutta tableau of ``method``."""
+    a_rows, b_row = _TABLEAUS[Integrator(method)]
+    a = np.zeros((MAX_STAGES, MAX_STAGES))
+    b = np.zeros(MAX_STAGES)
+    a[: len(a_rows), : len(a_rows)] = a_rows
+    b[: len(b_row)] = b_row
+    return a, b
+
+
+def parse_integrator(value: str | int | Integrator) -> Integrator:
+    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``) or code."""
+    if isinstance(value, str):
+        try:
+            return Integrator[value.upper()]
+        except KeyError:
+            names = [m.name.lower() for m in Integrator]
+            raise ValueError(f"integrator must be one of {names}, got {value!r}") from None
+    try:
+        return Integrator(value)
+    except ValueError:
+        raise ValueError(f"unknown integrator code {value!r}") from None

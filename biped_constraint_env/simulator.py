@@ -1,0 +1,661 @@
+"""The hybrid simulator: the only place that advances time.
+
+``step(params, state, tau, dt) -> StepResult`` integrates the current model with the chosen
+integrator and substeps, evaluates the guards after every substep, locates a guard crossing
+inside the substep by root-finding (Illinois regula falsi, to ``time_tol_s``) or, in the
+paper's manner, switches at the end of the substep; applies the reset map (impact,
+renumbering) and goes on in the successor model until the control period ``dt`` is over or a
+state outside the four models is reached.
+
+The whole loop is one compiled function (:func:`nb_advance`); :func:`nb_advance_batch` runs it
+over N independent simulators in one call (used by the batched vector environment).
+The simulator never draws random numbers, reads the clock or logs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from .hybrid import (
+    CONTACT_COL,
+    FO_POS_TOL,
+    FO_SLIP_EPS,
+    FO_TIME_TOL,
+    IMPACT_PAPER,
+    IMPACT_PLASTIC,
+    IO_FOOT_WEIGHT,
+    IO_IMPACT,
+    IO_INTEGRATOR,
+    IO_JDOT_FD,
+    IO_LOCATE,
+    IO_MAX_SWITCHES,
+    IO_PROJECT,
+    IO_STRICT,
+    IO_SUBSTEPS,
+    N_FOPT,
+    N_FORCES,
+    N_IOPT,
+    nb_evaluate,
+    nb_impact,
+    nb_project,
+    nb_renumber,
+    nb_solve_mode,
+)
+from .integrators import EVALS_PER_STEP, Integrator, parse_integrator, tableau
+from .kinematics import KEYPOINT_NAMES, nb_keypoints
+from .model import N_ACTUATED, N_LINKS, SC_HEEL5, BipedParams
+from .modes import FORCE_EVENTS, MODE_TABLE, N_GUARDS, EventCode, Mode, packed_mode_table
+
+MAX_EVENTS = 16
+"""Capacity of the per-control-period event buffer."""
+EV_T, EV_CODE, EV_FROM, EV_TO, EV_TERMINAL = range(5)
+ST_MODE, ST_SIDE, ST_STEPS, ST_IGNORED = range(4)
+FS_T, FS_ROOT = range(2)
+STATUS_OK, STATUS_TERMINATED, STATUS_NONFINITE = 0, 1, 2
+MAX_LOCATE_ITERATIONS = 100
+"""Safety cap on root-finding iterations (the tolerance is normally met in < 20)."""
+
+_RF, _CT, _GD, _SU, _RS = packed_mode_table()
+SUCCESSOR = tuple(int(x) for x in _SU)
+RESET = tuple(int(x) for x in _RS)
+FORCE_EVENT_FLAGS = tuple(int(EventCode(k) in FORCE_EVENTS) for k in range(N_GUARDS))
+N_STAGES = tuple(EVALS_PER_STEP[Integrator(m)] for m in range(len(Integrator)))
+SEMI_IMPLICIT = int(Integrator.SEMI_IMPLICIT)
+
+
+class SimulationError(RuntimeError):
+    """The simulation produced a non-finite state; ``state`` is the last finite one."""
+
+    def __init__(self, message: str, state: SimState, tau: np.ndarray | None = None):
+        """Store the last finite state and the torques that were applied."""
+        super().__init__(message)
+        self.state = state
+        self.tau = tau
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """Numerical and modelling options of the simulator (see README, Model).
+
+    Attributes:
+        integrator: ``"euler"``, ``"semi_implicit"``, ``"rk2"`` or ``"rk4"``.
+        substeps: integration steps per control period (>= 1).
+        impact: ``"paper"`` (all joint velocities zero at 2->3 and 3->4) or ``"plastic"``.
+        locate_events: locate guard crossings inside a substep (else switch at the sample).
+        jdot: ``"exact"`` J-dot q-dot, or ``"finite_difference"`` (paper eq. 7-8).
+        strict: end the run on force violations (else record them and go on).
+        heel_force_includes_foot_weight: add the stance foot's weight in paper eq. 18-19.
+        project_constraints: project the point contact onto z = 0 after every substep.
+        slip_eps_mps: friction regularisation speed [m/s].
+        pos_tol_m: penetration tolerated before a geometric event fires [m].
+        time_tol_s: event-time tolerance of the root-finding [s].
+        max_switches: model switches allowed in one control period before ZENO is declared.
+    """
+
+    integrator: str = "rk4"
+    substeps: int = 8
+    impact: str = "plastic"
+    locate_events: bool = True
+    jdot: str = "exact"
+    strict: bool = True
+    heel_force_includes_foot_weight: bool = False
+    project_constraints: bool = True
+    slip_eps_mps: float = 1e-3
+    pos_tol_m: float = 1e-9
+    time_tol_s: float = 1e-7
+    max_switches: int = 8
+
+    def __post_init__(self) -> None:
+        """Validate every option."""
+        parse_integrator(self.integrator)
+        if isinstance(self.substeps, bool) or not isinstance(self.substeps, (int, np.integer)):
+            raise ValueError(f"substeps must be an int >= 1, got {self.substeps!r}")
+        if self.substeps < 1:
+            raise ValueError(f"substeps must be >= 1, got {self.substeps!r}")
+        if self.impact not in ("paper", "plastic"):
+            raise ValueError(f"impact must be 'paper' or 'plastic', got {self.impact!r}")
+        if self.jdot not in ("exact", "finite_difference"):
+            raise ValueError(f"jdot must be 'exact' or 'finite_difference', got {self.jdot!r}")
+        for name in ("slip_eps_mps", "pos_tol_m", "time_tol_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+        if not isinstance(self.max_switches, (int, np.integer)) or self.max_switches < 1:
+            raise ValueError(f"max_switches must be an int >= 1, got {self.max_switches!r}")
+
+    @functools.cached_property
+    def packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(iopt, fopt, A, b) arrays for the compiled core."""
+        method = parse_integrator(self.integrator)
+        iopt = np.zeros(N_IOPT, np.int64)
+        iopt[IO_INTEGRATOR] = method
+        iopt[IO_SUBSTEPS] = self.substeps
+        iopt[IO_IMPACT] = IMPACT_PAPER if self.impact == "paper" else IMPACT_PLASTIC
+        iopt[IO_LOCATE] = self.locate_events
+        iopt[IO_JDOT_FD] = self.jdot == "finite_difference"
+        iopt[IO_STRICT] = self.strict
+        iopt[IO_FOOT_WEIGHT] = self.heel_force_includes_foot_weight
+        iopt[IO_PROJECT] = self.project_constraints
+        iopt[IO_MAX_SWITCHES] = self.max_switches
+        fopt = np.zeros(N_FOPT)
+        fopt[FO_SLIP_EPS] = self.slip_eps_mps
+        fopt[FO_POS_TOL] = self.pos_tol_m
+        fopt[FO_TIME_TOL] = self.time_tol_s
+        a, b = tableau(method)
+        for arr in (iopt, fopt, a, b):
+            arr.flags.writeable = False
+        return iopt, fopt, a, b
+
+    def replace(self, **changes: object) -> SimOptions:
+        """A copy with some options changed (validated)."""
+        return dataclasses.replace(self, **changes)
+
+
+DEFAULT_OPTIONS = SimOptions()
+"""Accurate defaults: RK4 x 8 substeps per 20 ms, located events, exact J-dot, strict, plastic."""
+
+PAPER_OPTIONS = SimOptions(
+    integrator="euler",
+    substeps=1,
+    impact="paper",
+    locate_events=False,
+    jdot="finite_difference",
+    strict=False,
+    heel_force_includes_foot_weight=False,
+    project_constraints=False,
+)
+"""The paper's numerics: explicit Euler at the sample, switch at the sample, finite-difference
+J-dot, zero-velocity impacts, foot weight left out, lenient force checks, no projection."""
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64, copy=True)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class SimState:
+    """Everything needed to continue a simulation (immutable).
+
+    Attributes:
+        t: simulated time [s].
+        mode: current paper model (1-4).
+        stance_side: which physical leg stands (0 = leg A, the paper's numbering; 1 = leg B).
+        q: (6,) joint angles (theta0, q1..q5) [rad] in the current numbering (MODEL.md).
+        qd: (6,) joint rates [rad/s].
+        root_y: world y of the chain root, the stance toe [m].
+        steps_completed: completed walking steps (cycles 1->2->3->4->1).
+        recorded_violations: bitmask of force events already recorded in this model phase
+            (``lenient`` mode only; bit k = EventCode k).
+    """
+
+    t: float
+    mode: Mode
+    stance_side: int
+    q: np.ndarray
+    qd: np.ndarray
+    root_y: float = 0.0
+    steps_completed: int = 0
+    recorded_violations: int = 0
+
+    def __post_init__(self) -> None:
+        """Validate shapes and values; freeze the arrays."""
+        object.__setattr__(self, "mode", Mode(int(self.mode)))
+        if self.stance_side not in (0, 1):
+            raise ValueError(f"stance_side must be 0 or 1, got {self.stance_side!r}")
+        for name in ("q", "qd"):
+            a = np.asarray(getattr(self, name), dtype=np.float64)
+            if a.shape != (N_LINKS,):
+                raise ValueError(f"{name} must have shape ({N_LINKS},), got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{name} must be finite, got {a}")
+            object.__setattr__(self, name, _frozen(a))
+        for name in ("t", "root_y"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
+
+    @property
+    def spec(self):
+        """The :class:`~biped_constraint_env.modes.ModeSpec` of the current model."""
+        return MODE_TABLE[self.mode]
+
+
+class Event(NamedTuple):
+    """Something that happened inside a control period."""
+
+    t: float
+    """Time of the event [s]."""
+    code: EventCode
+    """What happened (MODE_SWITCH or a named out-of-model event)."""
+    mode_from: int
+    """Model before the event."""
+    mode_to: int
+    """Model after the event (equal to mode_from for out-of-model events)."""
+    terminal: bool
+    """Whether the event ended the run."""
+
+
+class StepResult(NamedTuple):
+    """Outcome of :func:`step`."""
+
+    state: SimState
+    """State at the end of the control period (or at the terminal event)."""
+    events: tuple[Event, ...]
+    """Model switches and out-of-model events inside the period, in time order."""
+    terminated: bool
+    """Whether an out-of-model event ended the run."""
+    termination: EventCode | None
+    """The terminal event, if any."""
+    forces: np.ndarray
+    """(5,) contact forces at the end state: stance toe, stance heel, point contact f_n,
+    stance horizontal force [N], point-contact slip speed [m/s]."""
+
+
+# --------------------------------------------------------------------------- compiled core
+
+
+@njit(cache=True)
+def nb_integrate(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b):
+    """One integration step of length h [s] inside ``mode``; returns new (q, qd), projected."""
+    method = iopt[IO_INTEGRATOR]
+    fd = h if iopt[IO_JDOT_FD] != 0 else 0.0
+    eps = fopt[FO_SLIP_EPS]
+    if method == SEMI_IMPLICIT:
+        qdd = nb_solve_mode(ch, sc, mode, q, qd, tau6, h, fd, eps)[0]
+        qd1 = qd + h * qdd
+        q1 = q + h * qd1
+    else:
+        ns = N_STAGES[method]
+        kq = np.zeros((ns, 6))
+        kv = np.zeros((ns, 6))
+        for s in range(ns):
+            qs = q.copy()
+            vs = qd.copy()
+            for j in range(s):
+                if a[s, j] != 0.0:
+                    qs += (h * a[s, j]) * kq[j]
+                    vs += (h * a[s, j]) * kv[j]
+            kq[s] = vs
+            kv[s] = nb_solve_mode(ch, sc, mode, qs, vs, tau6, 0.0, fd, eps)[0]
+        q1 = q.copy()
+        qd1 = qd.copy()
+        for s in range(ns):
+            q1 += (h * b[s]) * kq[s]
+            qd1 += (h * b[s]) * kv[s]
+    if iopt[IO_PROJECT] != 0:
+        nb_project(ch, sc, mode, q1, qd1)
+    elif _RF[mode] == 0:
+        q1[0] = 0.0
+        qd1[0] = 0.0
+    return q1, qd1
+
+
+@njit(cache=True)
+def _fired(g, k, ignored):
+    if (ignored >> k) & 1:
+        return False
+    return g[k] <= 0.0 if k == 0 else g[k] < 0.0
+
+
+@njit(cache=True)
+def _gmin(g, mask):
+    v = np.inf
+    for k in range(g.shape[0]):
+        if (mask >> k) & 1:
+            v = min(v, g[k])
+    return v
+
+
+@njit(cache=True)
+def nb_locate(ch, sc, mode, q, qd, tau6, root_y, h, mask, g_hi, q_hi, qd_hi, iopt, fopt, a, b):
+    """Earliest crossing in (0, h] of the guards in ``mask``; returns (theta, q, qd).
+
+    Illinois regula falsi on G(theta) = min_k g_k(x(theta)), where x(theta) is the integrator's
+    step of length theta h from (q, qd); the bracket is closed to ``time_tol_s``.
+    """
+    fd = h if iopt[IO_JDOT_FD] != 0 else 0.0
+    g0 = nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, fd)[2]
+    glo = _gmin(g0, mask)
+    ghi = _gmin(g_hi, mask)
+    lo = 0.0
+    hi = 1.0
+    if not glo > 0.0:
+        return 0.0, q.copy(), qd.copy()
+    side = 0
+    tol = fopt[FO_TIME_TOL] / h
+    for it in range(MAX_LOCATE_ITERATIONS):
+        if hi - lo <= tol:
+            break
+        if it % 4 == 3:
+            th = 0.5 * (lo + hi)  # a bisection now and then guarantees the bracket shrinks
+        else:
+            th = (lo * ghi - hi * glo) / (ghi - glo)
+            th = min(max(th, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+        qt, qdt = nb_integrate(ch, sc, mode, q, qd, tau6, th * h, iopt, fopt, a, b)
+        gt = _gmin(nb_evaluate(ch, sc, mode, qt, qdt, tau6, root_y, iopt, fopt, fd)[2], mask)
+        if gt <= 0.0:
+            hi = th
+            ghi = gt
+            q_hi = qt
+            qd_hi = qdt
+            if side == -1:
+                glo *= 0.5
+            side = -1
+        else:
+            lo = th
+            glo = gt
+            if side == 1:
+                ghi *= 0.5
+            side = 1
+    return hi, q_hi, qd_hi
+
+
+@njit(cache=True)
+def _record(ev, nev, t, code, mfrom, mto, terminal):
+    if nev < ev.shape[0]:
+        ev[nev, 0] = t
+        ev[nev, 1] = code
+        ev[nev, 2] = mfrom
+        ev[nev, 3] = mto
+        ev[nev, 4] = terminal
+        return nev + 1
+    return nev
+
+
+@njit(cache=True)
+def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces):
+    """Advance one simulator by one control period dt [s], in place.
+
+    Args:
+        chs, scs: (2, 6, 6), (2, 7) packed chains of both numberings.
+        q, qd: (6,) state, updated in place. ist: int64 [mode, side, steps, ignored-mask];
+        fst: float64 [t, root_y], both updated in place.
+        tau_table: (4, 5) joint torques [N m] for models 1..4 (a row per model; the torque
+            switches with the model).
+        iopt, fopt, a, b: packed options and integrator tableau.
+        ev: (MAX_EVENTS, 5) event buffer (t, code, from, to, terminal), filled from row 0.
+        forces: (5,) output: contact forces at the final state.
+
+    Returns:
+        (status, number of events): status 0 running, 1 terminated, 2 non-finite.
+    """
+    mode = ist[ST_MODE]
+    side = ist[ST_SIDE]
+    steps = ist[ST_STEPS]
+    ignored = ist[ST_IGNORED]
+    t = fst[FS_T]
+    root_y = fst[FS_ROOT]
+    t_end = t + dt
+    h_nom = dt / iopt[IO_SUBSTEPS]
+    strict = iopt[IO_STRICT] != 0
+    nev = 0
+    status = 0
+    switches = 0
+    check = True
+    tau6 = np.zeros(6)
+    while True:
+        ch = chs[side]
+        sc = scs[side]
+        for j in range(5):
+            tau6[j + 1] = tau_table[mode - 1, j]
+        k = -1
+        if check:
+            g = nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, 0.0)[2]
+            for kk in range(1, N_GUARDS):
+                if _fired(g, kk, ignored):
+                    k = kk
+                    break
+            if k < 0 and _fired(g, 0, ignored):
+                k = 0
+            check = False
+        if k < 0:
+            if t_end - t <= 1e-9 * dt:
+                break
+            hh = min(h_nom, t_end - t)
+            q1, qd1 = nb_integrate(ch, sc, mode, q, qd, tau6, hh, iopt, fopt, a, b)
+            finite = True
+            for j in range(6):
+                if not (np.isfinite(q1[j]) and np.isfinite(qd1[j])):
+                    finite = False
+            if not finite:
+                status = 2
+                break
+            fd = hh if iopt[IO_JDOT_FD] != 0 else 0.0
+            g1 = nb_evaluate(ch, sc, mode, q1, qd1, tau6, root_y, iopt, fopt, fd)[2]
+            mask = 0
+            for kk in range(N_GUARDS):
+                if _fired(g1, kk, ignored):
+                    mask |= 1 << kk
+            if mask == 0:
+                q[:] = q1
+                qd[:] = qd1
+                t += hh
+                continue
+            if iopt[IO_LOCATE] != 0:
+                th, q1, qd1 = nb_locate(
+                    ch, sc, mode, q, qd, tau6, root_y, hh, mask, g1, q1, qd1, iopt, fopt, a, b
+                )
+                t += th * hh
+                g1 = nb_evaluate(ch, sc, mode, q1, qd1, tau6, root_y, iopt, fopt, fd)[2]
+            else:
+                t += hh
+            q[:] = q1
+            qd[:] = qd1
+            best = np.inf
+            for kk in range(1, N_GUARDS):
+                if (mask >> kk) & 1 and g1[kk] <= 0.0:
+                    k = kk
+                    break
+            if k < 0:
+                if (mask & 1) and g1[0] <= 0.0:
+                    k = 0
+                else:
+                    for kk in range(N_GUARDS):
+                        if (mask >> kk) & 1 and g1[kk] < best:
+                            best = g1[kk]
+                            k = kk
+        # ---- handle event k at time t, state (q, qd)
+        if k == 0:
+            succ = SUCCESSOR[mode]
+            reset = RESET[mode]
+            if reset == 1:
+                heel_y = nb_keypoints(ch, sc, q, root_y)[7, 0]
+                if heel_y < root_y:
+                    nev = _record(ev, nev, t, 9, mode, mode, 1)
+                    status = 1
+                    break
+                qd[:] = nb_impact(ch, sc, 1, q, qd, iopt[IO_IMPACT])
+            elif reset == 2:
+                qd[:] = nb_impact(ch, sc, 2, q, qd, iopt[IO_IMPACT])
+                qn, qdn, root_y = nb_renumber(ch, chs[1 - side], sc, q, qd, root_y)
+                q[:] = qn
+                qd[:] = qdn
+                side = 1 - side
+            nev = _record(ev, nev, t, 0, mode, succ, 0)
+            if mode == 4:
+                steps += 1
+            mode = succ
+            nb_project(chs[side], scs[side], mode, q, qd)
+            ignored = 0
+            switches += 1
+            if switches > iopt[IO_MAX_SWITCHES]:
+                nev = _record(ev, nev, t, 10, mode, mode, 1)
+                status = 1
+                break
+            check = True
+        else:
+            terminal = strict or FORCE_EVENT_FLAGS[k] == 0
+            nev = _record(ev, nev, t, k, mode, mode, 1 if terminal else 0)
+            if terminal:
+                status = 1
+                break
+            ignored |= 1 << k
+            check = True
+    ch = chs[side]
+    sc = scs[side]
+    for j in range(5):
+        tau6[j + 1] = tau_table[mode - 1, j]
+    if status != 2:
+        forces[:] = nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, 0.0)[1]
+    ist[ST_MODE] = mode
+    ist[ST_SIDE] = side
+    ist[ST_STEPS] = steps
+    ist[ST_IGNORED] = ignored
+    fst[FS_T] = t
+    fst[FS_ROOT] = root_y
+    return status, nev
+
+
+@njit(cache=True)
+def nb_advance_batch(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV):
+    """:func:`nb_advance` over N simulators (rows of every array); skips rows with STATUS != 0."""
+    for i in range(Q.shape[0]):
+        if STATUS[i] != 0:
+            NEV[i] = 0
+            continue
+        st, ne = nb_advance(
+            chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i], FORCES[i]
+        )
+        STATUS[i] = st
+        NEV[i] = ne
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def _tau_table(tau) -> np.ndarray:
+    a = np.asarray(tau, dtype=np.float64)
+    if a.shape == (N_ACTUATED,):
+        a = np.broadcast_to(a, (4, N_ACTUATED))
+    elif a.shape != (4, N_ACTUATED):
+        raise ValueError(f"tau must have shape (5,) or (4, 5), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"tau must be finite, got {a}")
+    return np.ascontiguousarray(a)
+
+
+def events_from_buffer(ev: np.ndarray, nev: int) -> tuple[Event, ...]:
+    """Decode the first ``nev`` rows of an event buffer."""
+    return tuple(
+        Event(float(r[0]), EventCode(int(r[1])), int(r[2]), int(r[3]), bool(r[4])) for r in ev[:nev]
+    )
+
+
+def step(
+    params: BipedParams,
+    state: SimState,
+    tau,
+    dt: float,
+    options: SimOptions = DEFAULT_OPTIONS,
+) -> StepResult:
+    """Advance the hybrid system by one control period.
+
+    Args:
+        params: the robot.
+        state: the current state.
+        tau: (5,) joint torques [N m] (MODEL.md signs, current numbering), held over dt; or
+            (4, 5), one row per model (the torque switches with the model, as in Table 2).
+        dt: control period [s], > 0.
+        options: numerics and modelling options.
+
+    Returns:
+        The :class:`StepResult`.
+
+    Raises:
+        ValueError: non-finite or wrong-shape torques, or a bad dt.
+        SimulationError: the state became non-finite (carries the last finite state).
+    """
+    table = _tau_table(tau)
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be finite and > 0, got {dt!r}")
+    chs, scs = params.packed
+    iopt, fopt, a, b = options.packed
+    q = state.q.copy()
+    qd = state.qd.copy()
+    ist = np.array(
+        [int(state.mode), state.stance_side, state.steps_completed, state.recorded_violations],
+        np.int64,
+    )
+    fst = np.array([state.t, state.root_y])
+    ev = np.zeros((MAX_EVENTS, 5))
+    forces = np.zeros(N_FORCES)
+    status, nev = nb_advance(chs, scs, q, qd, ist, fst, table, float(dt), iopt, fopt, a, b, ev, forces)
+    events = events_from_buffer(ev, nev)
+    new_state = SimState(
+        t=float(fst[FS_T]),
+        mode=Mode(int(ist[ST_MODE])),
+        stance_side=int(ist[ST_SIDE]),
+        q=q,
+        qd=qd,
+        root_y=float(fst[FS_ROOT]),
+        steps_completed=int(ist[ST_STEPS]),
+        recorded_violations=int(ist[ST_IGNORED]),
+    ) if status != STATUS_NONFINITE else None
+    if status == STATUS_NONFINITE:
+        raise SimulationError(
+            f"non-finite state after t = {fst[FS_T]:.6f} s in model {int(ist[ST_MODE])}", 
+            SimState(float(fst[FS_T]), Mode(int(ist[ST_MODE])), int(ist[ST_SIDE]), q, qd,
+                     float(fst[FS_ROOT]), int(ist[ST_STEPS]), int(ist[ST_IGNORED])),
+            table,
+        )
+    termination = next((e.code for e in events if e.terminal), None)
+    return StepResult(new_state, events, status == STATUS_TERMINATED, termination, forces)
+
+
+def keypoints(params: BipedParams, state: SimState) -> dict[str, np.ndarray]:
+    """World positions [m] of the toes, heels, ankles, knees and hip, by name."""
+    ch = params.chain(state.stance_side)
+    pts = nb_keypoints(ch.packed, ch.packed_scalars, state.q, state.root_y)
+    return {name: pts[i].copy() for i, name in enumerate(KEYPOINT_NAMES)}
+
+
+def evaluate(params: BipedParams, state: SimState, tau, options: SimOptions = DEFAULT_OPTIONS):
+    """Solve the current model at ``state``: (qdd (6,), forces (5,), guards (9,)).
+
+    ``tau`` is (5,) or (4, 5) as in :func:`step` (the current model's row is used).
+    """
+    table = _tau_table(tau)
+    tau6 = np.zeros(N_LINKS)
+    tau6[1:] = table[int(state.mode) - 1]
+    ch = params.chain(state.stance_side)
+    iopt, fopt, _, _ = options.packed
+    qdd, forces, guards, _ = nb_evaluate(
+        ch.packed, ch.packed_scalars, int(state.mode), state.q, state.qd, tau6, state.root_y,
+        iopt, fopt, 0.0,
+    )
+    return qdd, forces, guards
+
+
+def rollout(
+    params: BipedParams,
+    state: SimState,
+    tau,
+    dt: float,
+    n_steps: int,
+    options: SimOptions = DEFAULT_OPTIONS,
+) -> tuple[list[SimState], list[Event], EventCode | None]:
+    """Apply the same torques for up to ``n_steps`` control periods (stops at a terminal event).
+
+    Returns the states (the initial one first), all events, and the terminal event or None.
+    """
+    states = [state]
+    events: list[Event] = []
+    for _ in range(int(n_steps)):
+        res = step(params, states[-1], tau, dt, options)
+        states.append(res.state)
+        events.extend(res.events)
+        if res.terminated:
+            return states, events, res.termination
+    return states, events, None
+
+
+def swing_heel_offset(params: BipedParams, stance_side: int) -> float:
+    """Offset of the swing heel from the swing ankle along the swing foot [m]."""
+    return float(params.chain(stance_side).packed_scalars[SC_HEEL5])
