@@ -196,6 +196,28 @@ def mass_matrix(chain: ChainModel, q) -> np.ndarray:
     return nb_mass_matrix(chain.packed, _vec6("q", q))
 
 
+@njit(cache=True)
+def nb_energy(ch, q, qd, g):
+    """(kinetic, potential) energy [J] of the chain with its root at height 0."""
+    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, qd, np.zeros(N_LINKS), 0.0, 0.0)
+    kinetic = 0.0
+    potential = 0.0
+    for i in range(N_LINKS):
+        c = np.cos(phi[i])
+        s = np.sin(phi[i])
+        m = ch[i, COL_MASS]
+        vy = vo[i, 0] - w[i] * ch[i, COL_COM] * s
+        vz = vo[i, 1] + w[i] * ch[i, COL_COM] * c
+        kinetic += 0.5 * (m * (vy * vy + vz * vz) + ch[i, COL_INERTIA] * w[i] * w[i])
+        potential += m * g * (o[i, 1] + ch[i, COL_COM] * s)
+    return kinetic, potential
+
+
+def energy(chain: ChainModel, q, qd) -> tuple[float, float]:
+    """(kinetic, potential) energy [J]; potential measured from the ground (z = 0)."""
+    return nb_energy(chain.packed, _vec6("q", q), _vec6("qd", qd), chain.packed_scalars[SC_GRAVITY])
+
+
 def damping_matrix(chain: ChainModel) -> np.ndarray:
     """(6, 6) diagonal joint damping D [N m s/rad] (joint 0 = toe pivot)."""
     return np.diag(np.asarray(chain.joint_damping_nms_per_rad, dtype=np.float64))

@@ -233,7 +233,7 @@ def nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, fd_h):
         g[EventCode.STANCE_HEEL_DOWN] = heel5_z + tol
         g[EventCode.STANCE_FOOT_PULLS] = min(forces[FC_HEEL], forces[FC_TOE])
     zmin = INF
-    for k in range(1, 6):
+    for k in range(2, 6):  # knee, hip, knee, swing ankle (the stance ankle: heel-down guard)
         zmin = min(zmin, o[k, 1])
     g[EventCode.BODY_BELOW_GROUND] = zmin + tol
     return qdd, forces, g, piv

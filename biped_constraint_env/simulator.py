@@ -67,6 +67,8 @@ RESET = tuple(int(x) for x in _RS)
 FORCE_EVENT_FLAGS = tuple(int(EventCode(k) in FORCE_EVENTS) for k in range(N_GUARDS))
 N_STAGES = tuple(EVALS_PER_STEP[Integrator(m)] for m in range(len(Integrator)))
 SEMI_IMPLICIT = int(Integrator.SEMI_IMPLICIT)
+EVENT_PRIORITY = (5, 2, 3, 4, 1, 6, 7, 8)
+"""Order in which simultaneous out-of-model guards are reported: geometry before forces."""
 
 
 class SimulationError(RuntimeError):
@@ -408,7 +410,7 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
         k = -1
         if check:
             g = nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, 0.0)[2]
-            for kk in range(1, N_GUARDS):
+            for kk in EVENT_PRIORITY:
                 if _fired(g, kk, ignored):
                     k = kk
                     break
@@ -449,7 +451,7 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
             q[:] = q1
             qd[:] = qd1
             best = np.inf
-            for kk in range(1, N_GUARDS):
+            for kk in EVENT_PRIORITY:
                 if (mask >> kk) & 1 and g1[kk] <= 0.0:
                     k = kk
                     break
@@ -659,3 +661,31 @@ def rollout(
 def swing_heel_offset(params: BipedParams, stance_side: int) -> float:
     """Offset of the swing heel from the swing ankle along the swing foot [m]."""
     return float(params.chain(stance_side).packed_scalars[SC_HEEL5])
+
+
+def integrate_mode(
+    params: BipedParams,
+    state: SimState,
+    tau,
+    h: float,
+    options: SimOptions = DEFAULT_OPTIONS,
+) -> SimState:
+    """One integration step of length h [s] inside the current model, with no guards.
+
+    For studies of the integrators alone (convergence, stability); :func:`step` is the
+    simulator. Raises SimulationError on a non-finite result.
+    """
+    table = _tau_table(tau)
+    if not (np.isfinite(h) and h > 0):
+        raise ValueError(f"h must be finite and > 0, got {h!r}")
+    tau6 = np.zeros(N_LINKS)
+    tau6[1:] = table[int(state.mode) - 1]
+    ch = params.chain(state.stance_side)
+    iopt, fopt, a, b = options.packed
+    q1, qd1 = nb_integrate(
+        ch.packed, ch.packed_scalars, int(state.mode), state.q.copy(), state.qd.copy(), tau6,
+        float(h), iopt, fopt, a, b,
+    )
+    if not (np.all(np.isfinite(q1)) and np.all(np.isfinite(qd1))):
+        raise SimulationError(f"non-finite state after one step of {h} s", state, table)
+    return dataclasses.replace(state, t=state.t + h, q=q1, qd=qd1)
