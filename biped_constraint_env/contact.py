@@ -26,7 +26,7 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
-from .kinematics import nb_point_jacobian, nb_point_kinematics
+from .kinematics import nb_jacobian_into, nb_point
 from .model import SC_HEEL5, SC_TOE5
 
 
@@ -62,34 +62,30 @@ def nb_slip_sign(v_slip, eps):
 
 
 @njit(cache=True)
-def nb_contact_rows(kin, q, qd, s_off, friction, eps, fd_h, fk_prev):
-    """Rows of one point contact at offset ``s_off`` on link 5.
+def nb_contact_rows(K, Kp, qd, s_off, eps, fd_h, jac, jacp):
+    """Rows of one point contact at offset ``s_off`` [m] on link 5.
 
     Args:
-        kin: the forward pass tuple (phi, w, al, o, vo, ao) at (q, qd, qdd = 0, g = 0).
-        q, qd: (6,) state. s_off: offset of the point along link 5 [m].
-        friction: K. eps: slip regularisation [m/s].
+        K: kinematic table of the forward pass at (q, qd, qdd = 0).
+        Kp: table at the previous sample q - fd_h qd (read only when fd_h > 0).
+        qd: (6,) joint rates. eps: slip regularisation [m/s].
         fd_h: 0 for the exact J-dot q-dot, else the sample time [s] of the paper's difference.
-        fk_prev: forward pass at q - fd_h * qd (used only when fd_h > 0).
+        jac, jacp: (2, 6) outputs: the point Jacobian at q (and at the previous sample).
 
     Returns:
-        c_row (6,): J_z, the constraint Jacobian row C_q.
-        force_row (6,): (J_c - K s J_t), the generalised force per unit f_n.
-        gamma: constraint bias -Jdot_z qd [m/s^2].
-        slip_sign: s.
+        gamma: the constraint bias -Jdot_z qd [m/s^2]; C_q = jac[1] (= J_c).
+        slip_sign: s, so that the generalised force per unit f_n is jac[1] - K s jac[0].
     """
-    phi, w, al, o, vo, ao = kin
-    jac = nb_point_jacobian(phi, o, 5, s_off)
+    nb_jacobian_into(K, 5, s_off, jac)
     v_slip = 0.0
     for j in range(6):
         v_slip += jac[0, j] * qd[j]
     sg = nb_slip_sign(v_slip, eps)
-    force_row = jac[1] - friction * sg * jac[0]
     if fd_h > 0.0:
-        jp = nb_point_jacobian(fk_prev[0], fk_prev[3], 5, s_off)
+        nb_jacobian_into(Kp, 5, s_off, jacp)
         gamma = 0.0
         for j in range(6):
-            gamma -= (jac[1, j] - jp[1, j]) * qd[j] / fd_h
+            gamma -= (jac[1, j] - jacp[1, j]) * qd[j] / fd_h
     else:
-        gamma = -nb_point_kinematics(phi, w, al, o, vo, ao, 5, s_off)[2][1]
-    return jac[1].copy(), force_row, gamma, sg
+        gamma = -nb_point(K, 5, s_off)[5]
+    return gamma, sg

@@ -16,7 +16,20 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .kinematics import _vec6, nb_forward_pass
+from .kinematics import (
+    K_AL,
+    K_AY,
+    K_AZ,
+    K_COS,
+    K_OY,
+    K_OZ,
+    K_SIN,
+    K_W,
+    NK,
+    _vec6,
+    nb_fk,
+    nb_forward_pass,
+)
 from .model import (
     COL_COM,
     COL_INERTIA,
@@ -26,6 +39,46 @@ from .model import (
     SC_GRAVITY,
     ChainModel,
 )
+
+
+@njit(cache=True)
+def nb_rnea_backward(ch, K, g, ext_link, ext_s, ext_fy, ext_fz, f, n):
+    """Backward Newton-Euler pass over the kinematic table K of :func:`nb_fk`.
+
+    Gravity enters as an upward base acceleration g, which shifts every joint-origin
+    acceleration by (0, g), so one forward pass at g = 0 serves kinematics and dynamics.
+    An external force (ext_fy, ext_fz) [N] acts at offset ext_s [m] on link ext_link (< 0:
+    none). Fills f (6, 2) (force on link i from link i-1 at joint i [N]; row 0: from the
+    ground) and n (6,) (moment about joint i [N m] = the joint torque, damping excluded).
+    """
+    fny = 0.0
+    fnz = 0.0
+    nn = 0.0
+    for i in range(N_LINKS - 1, -1, -1):
+        c = K[i, K_COS]
+        s = K[i, K_SIN]
+        w = K[i, K_W]
+        al = K[i, K_AL]
+        rcy = ch[i, COL_COM] * c
+        rcz = ch[i, COL_COM] * s
+        m = ch[i, COL_MASS]
+        acy = K[i, K_AY] - al * rcz - w * w * rcy
+        acz = K[i, K_AZ] + g + al * rcy - w * w * rcz
+        fy = m * acy + fny
+        fz = m * acz + fnz
+        mom = ch[i, COL_INERTIA] * al + rcy * m * acz - rcz * m * acy + nn
+        if i < N_LINKS - 1:
+            mom += ch[i, COL_NEXT] * (c * fnz - s * fny)
+        if i == ext_link:
+            fy -= ext_fy
+            fz -= ext_fz
+            mom -= ext_s * (c * ext_fz - s * ext_fy)
+        f[i, 0] = fy
+        f[i, 1] = fz
+        n[i] = mom
+        fny = fy
+        fnz = fz
+        nn = mom
 
 
 @njit(cache=True)
@@ -43,39 +96,11 @@ def nb_rnea_full(ch, q, qd, qdd, g, ext_link, ext_s, ext_f):
         f (6, 2): force on link i from link i-1 at joint i (i = 0: from the ground) [N];
         n (6,): moment on link i from link i-1 about joint i [N m] (n = tau).
     """
-    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, qd, qdd, 0.0, g)
-    f = np.zeros((N_LINKS, 2))
-    n = np.zeros(N_LINKS)
-    fny = 0.0
-    fnz = 0.0
-    nn = 0.0
-    for i in range(N_LINKS - 1, -1, -1):
-        c = np.cos(phi[i])
-        s = np.sin(phi[i])
-        rcy = ch[i, COL_COM] * c
-        rcz = ch[i, COL_COM] * s
-        m = ch[i, COL_MASS]
-        acy = ao[i, 0] - al[i] * rcz - w[i] * w[i] * rcy
-        acz = ao[i, 1] + al[i] * rcy - w[i] * w[i] * rcz
-        fy = m * acy + fny
-        fz = m * acz + fnz
-        mom = ch[i, COL_INERTIA] * al[i] + rcy * m * acz - rcz * m * acy + nn
-        if i < N_LINKS - 1:
-            rny = ch[i, COL_NEXT] * c
-            rnz = ch[i, COL_NEXT] * s
-            mom += rny * fnz - rnz * fny
-        if i == ext_link:
-            rey = ext_s * c
-            rez = ext_s * s
-            fy -= ext_f[0]
-            fz -= ext_f[1]
-            mom -= rey * ext_f[1] - rez * ext_f[0]
-        f[i, 0] = fy
-        f[i, 1] = fz
-        n[i] = mom
-        fny = fy
-        fnz = fz
-        nn = mom
+    K = np.empty((N_LINKS, NK))
+    nb_fk(ch, q, qd, qdd, 0.0, K)
+    f = np.empty((N_LINKS, 2))
+    n = np.empty(N_LINKS)
+    nb_rnea_backward(ch, K, g, ext_link, ext_s, ext_f[0], ext_f[1], f, n)
     return n.copy(), f, n
 
 
@@ -98,40 +123,48 @@ def nb_mass_matrix_rnea(ch, q):
 
 
 @njit(cache=True)
-def nb_mass_matrix(ch, q):
-    """(6, 6) mass matrix by the composite-rigid-body algorithm (O(n^2), one pass)."""
-    z = np.zeros(N_LINKS)
-    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, z, z, 0.0, 0.0)
-    # Composite body j = links j..5: mass, first moment (for its COM) and inertia about o_j.
+def nb_crba(ch, K, M, tmp):
+    """Fill M (6, 6) by the composite-rigid-body algorithm from the table K.
+
+    Body j^c = links j..5; M[i, j] = Io_j + m_j^c (o_j - o_i).(c_j^c - o_j) for i <= j, with Io_j
+    its inertia about joint j. ``tmp`` is a (4, 6) scratch array.
+    """
     cm = 0.0
     sy = 0.0
     sz = 0.0
     ic = 0.0  # sum of I_k + m_k |c_k|^2 about the world origin
-    mc = np.empty(N_LINKS)
-    ccy = np.empty(N_LINKS)
-    ccz = np.empty(N_LINKS)
-    io = np.empty(N_LINKS)
     for j in range(N_LINKS - 1, -1, -1):
         m = ch[j, COL_MASS]
-        cy = o[j, 0] + ch[j, COL_COM] * np.cos(phi[j])
-        cz = o[j, 1] + ch[j, COL_COM] * np.sin(phi[j])
+        oy = K[j, K_OY]
+        oz = K[j, K_OZ]
+        cy = oy + ch[j, COL_COM] * K[j, K_COS]
+        cz = oz + ch[j, COL_COM] * K[j, K_SIN]
         cm += m
         sy += m * cy
         sz += m * cz
         ic += ch[j, COL_INERTIA] + m * (cy * cy + cz * cz)
-        mc[j] = cm
-        ccy[j] = sy / cm
-        ccz[j] = sz / cm
-        # parallel-axis shift from the origin to o_j
-        io[j] = ic - 2.0 * (o[j, 0] * sy + o[j, 1] * sz) + cm * (o[j, 0] ** 2 + o[j, 1] ** 2)
-    M = np.empty((N_LINKS, N_LINKS))
+        tmp[0, j] = cm
+        tmp[1, j] = sy / cm - oy
+        tmp[2, j] = sz / cm - oz
+        # parallel-axis shift from the world origin to o_j
+        tmp[3, j] = ic - 2.0 * (oy * sy + oz * sz) + cm * (oy * oy + oz * oz)
     for j in range(N_LINKS):
-        ey = ccy[j] - o[j, 0]
-        ez = ccz[j] - o[j, 1]
         for i in range(j + 1):
-            v = io[j] + mc[j] * ((o[j, 0] - o[i, 0]) * ey + (o[j, 1] - o[i, 1]) * ez)
+            v = tmp[3, j] + tmp[0, j] * (
+                (K[j, K_OY] - K[i, K_OY]) * tmp[1, j] + (K[j, K_OZ] - K[i, K_OZ]) * tmp[2, j]
+            )
             M[i, j] = v
             M[j, i] = v
+
+
+@njit(cache=True)
+def nb_mass_matrix(ch, q):
+    """(6, 6) mass matrix by the composite-rigid-body algorithm (O(n^2), one pass)."""
+    z = np.zeros(N_LINKS)
+    K = np.empty((N_LINKS, NK))
+    nb_fk(ch, q, z, z, 0.0, K)
+    M = np.empty((N_LINKS, N_LINKS))
+    nb_crba(ch, K, M, np.empty((4, N_LINKS)))
     return M
 
 

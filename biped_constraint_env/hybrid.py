@@ -1,17 +1,20 @@
 """Solving one model, its guards, and the reset maps between models (compiled core).
 
-- :func:`nb_solve_mode`: the one constrained solve of paper eq. 9 for every model,
+- :func:`nb_solve_mode_w`: the one constrained solve of paper eq. 9 for every model,
   ``[[M + h_imp D, -(J_c - K s J_t)^T], [J_c, 0]] [qdd; f_n] = [tau - b - D qd; gamma]``,
   restricted to the model's unknowns (theta0 dropped in models 1 and 4, f_n only with a point
-  contact). It uses an LU factorisation with partial pivoting (never an inverse).
-- :func:`nb_evaluate`: the solve plus the contact forces and the guard vector (see
+  contact), solved by LU with partial pivoting (never an inverse). One forward pass gives M
+  (CRBA), the bias b = INV(q, qd, 0, g) (backward pass) and the exact J-dot q-dot.
+- :func:`nb_evaluate_w`: the solve plus the contact forces and the guard vector (see
   :mod:`biped_constraint_env.modes` for the sign convention).
-- Reset maps: :func:`nb_impact` (``"paper"``: all joint velocities to zero; ``"plastic"``: the
+- Reset maps: :func:`nb_impact` (``"paper"``: all joint velocities zero; ``"plastic"``: the
   impulse that brings the new contact to rest, kinetic energy never increases) and
   :func:`nb_renumber` (paper eq. 25-29: the chain re-rooted at the new stance toe; every link's
   world pose and angular velocity unchanged).
-- :func:`nb_project`: projection of the point contact back onto ``z = 0`` (positions, Euclidean
-  Newton step) and of the velocities onto ``J_z qd = 0`` (in the kinetic-energy metric).
+- :func:`nb_project_w`: projection of the point contact back onto ``z = 0`` (positions,
+  Euclidean Newton steps) and of the velocities onto ``J_z qd = 0`` (kinetic-energy metric).
+
+Functions suffixed ``_w`` take a workspace from :func:`nb_make_work` and allocate nothing.
 """
 
 from __future__ import annotations
@@ -22,8 +25,8 @@ import numpy as np
 from numba import njit
 
 from .contact import nb_contact_rows
-from .dynamics import nb_mass_matrix, nb_rnea, nb_rnea_full
-from .kinematics import nb_forward_pass, nb_point_jacobian
+from .dynamics import nb_crba, nb_mass_matrix, nb_rnea_backward
+from .kinematics import K_COS, K_OY, K_OZ, K_PHI, K_SIN, NK, nb_fk, nb_forward_pass, nb_point_jacobian
 from .model import (
     COL_ANGLE,
     COL_DAMPING,
@@ -49,11 +52,43 @@ FO_SLIP_EPS, FO_POS_TOL, FO_TIME_TOL = range(3)
 N_FOPT = 3
 IMPACT_PAPER, IMPACT_PLASTIC = 0, 1
 
-# Contact-force vector returned by nb_evaluate.
+# Contact-force vector filled by nb_evaluate_w.
 FC_TOE, FC_HEEL, FC_CONTACT, FC_STANCE_Y, FC_SLIP = range(5)
 N_FORCES = 5
 
+# Workspace layout (a tuple of arrays).
+W_K, W_KP, W_M, W_TMP, W_F, W_N, W_A, W_R, W_JAC, W_JACP, W_QDD, W_Z6 = range(12)
+
 INF = math.inf
+
+# Guard indices as plain ints for the compiled code (= the EventCode values).
+G_TIPS_BACK = int(EventCode.STANCE_FOOT_TIPS_BACK)
+G_HEEL_DOWN = int(EventCode.STANCE_HEEL_DOWN)
+G_TOE_STRIKE = int(EventCode.SWING_TOE_STRIKE)
+G_TOUCHDOWN = int(EventCode.SWING_FOOT_TOUCHDOWN)
+G_BELOW_GROUND = int(EventCode.BODY_BELOW_GROUND)
+G_HEEL_PULLS = int(EventCode.SWING_HEEL_PULLS)
+G_TOE_PULLS = int(EventCode.STANCE_TOE_PULLS)
+G_FOOT_PULLS = int(EventCode.STANCE_FOOT_PULLS)
+
+
+@njit(cache=True)
+def nb_make_work():
+    """A fresh workspace for the ``_w`` functions."""
+    return (
+        np.empty((6, NK)),  # K: forward pass at the current state
+        np.empty((6, NK)),  # Kp: forward pass at the previous sample (finite-difference J-dot)
+        np.empty((6, 6)),  # M
+        np.empty((4, 6)),  # CRBA scratch
+        np.empty((6, 2)),  # joint forces
+        np.empty(6),  # joint moments / bias
+        np.empty((7, 7)),  # KKT matrix
+        np.empty(7),  # KKT right-hand side / solution
+        np.empty((2, 6)),  # point Jacobian
+        np.empty((2, 6)),  # point Jacobian at the previous sample
+        np.empty(6),  # qdd
+        np.zeros(6),  # zeros (never written)
+    )
 
 
 @njit(cache=True)
@@ -63,14 +98,12 @@ def nb_wrap(a):
 
 
 @njit(cache=True)
-def nb_lu_solve(a, b):
-    """Solve a x = b (small dense) by LU with partial pivoting; returns (x, pivot ratio).
+def nb_lu_solve_inplace(m, x, n):
+    """Solve the leading n x n block of m against x[:n] in place (LU, partial pivoting).
 
-    The pivot ratio min|u_ii| / max|u_ii| is a cheap conditioning indicator (0: singular).
+    m is destroyed; x holds the solution. Returns the pivot ratio min|u_ii| / max|u_ii|, a
+    cheap conditioning indicator (0: singular).
     """
-    n = b.shape[0]
-    m = a.copy()
-    x = b.copy()
     umin = INF
     umax = 0.0
     for k in range(n):
@@ -104,33 +137,47 @@ def nb_lu_solve(a, b):
         for j in range(k + 1, n):
             s -= m[k, j] * x[j]
         x[k] = s / m[k, k]
-    return x, (umin / umax if umax > 0.0 else 0.0)
+    return umin / umax if umax > 0.0 else 0.0
 
 
 @njit(cache=True)
-def nb_solve_mode(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps):
-    """The constrained solve of paper eq. 9 for ``mode`` (1..4).
+def nb_lu_solve(a, b):
+    """Solve a x = b (small dense; allocating); returns (x, pivot ratio)."""
+    m = a.copy()
+    x = b.copy()
+    piv = nb_lu_solve_inplace(m, x, b.shape[0])
+    return x, piv
+
+
+@njit(cache=True)
+def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W):
+    """The constrained solve of paper eq. 9 for ``mode`` (1..4); qdd goes to W[W_QDD].
 
     Args:
         ch, sc: packed chain and scalars. q, qd: (6,) state. tau6: (6,) joint torques, tau6[0]=0.
         h_imp: step [s] with which the damping is treated implicitly (0: plain dynamics).
         jdot_fd_h: 0 for the exact J-dot q-dot; > 0 for the paper's backward difference.
         slip_eps: friction regularisation speed [m/s].
+        W: workspace.
 
     Returns:
-        qdd (6,) [rad/s^2] (qdd[0] = 0 in models 1 and 4), f_n [N] (0 without contact),
-        slip sign s, pivot ratio of the factorisation.
+        f_n [N] (0 without contact), slip sign s, pivot ratio of the factorisation.
     """
+    K = W[W_K]
+    M = W[W_M]
+    A = W[W_A]
+    r = W[W_R]
+    jac = W[W_JAC]
+    qdd = W[W_QDD]
+    z6 = W[W_Z6]
     s0 = 1 - ROOT_FREE[mode]
     n = 6 - s0
     col = CONTACT_COL[mode]
     nc = 1 if col >= 0 else 0
-    z6 = np.zeros(6)
-    kin = nb_forward_pass(ch, q, qd, z6, 0.0, 0.0)
-    M = nb_mass_matrix(ch, q)
-    b = nb_rnea(ch, q, qd, z6, sc[SC_GRAVITY])
-    A = np.zeros((n + nc, n + nc))
-    r = np.zeros(n + nc)
+    nb_fk(ch, q, qd, z6, 0.0, K)
+    nb_crba(ch, K, M, W[W_TMP])
+    b = W[W_N]
+    nb_rnea_backward(ch, K, sc[SC_GRAVITY], -1, 0.0, 0.0, 0.0, W[W_F], b)
     for i in range(n):
         di = ch[s0 + i, COL_DAMPING]
         for j in range(n):
@@ -140,22 +187,29 @@ def nb_solve_mode(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps):
     sg = 0.0
     if nc == 1:
         if jdot_fd_h > 0.0:
-            kin_prev = nb_forward_pass(ch, q - jdot_fd_h * qd, z6, z6, 0.0, 0.0)
-        else:
-            kin_prev = kin
-        c_row, f_row, gamma, sg = nb_contact_rows(
-            kin, q, qd, sc[col], sc[SC_FRICTION], slip_eps, jdot_fd_h, kin_prev
+            nb_fk(ch, q - jdot_fd_h * qd, z6, z6, 0.0, W[W_KP])
+        gamma, sg = nb_contact_rows(
+            K, W[W_KP], qd, sc[col], slip_eps, jdot_fd_h, jac, W[W_JACP]
         )
+        fric = sc[SC_FRICTION] * sg
         for i in range(n):
-            A[i, n] = -f_row[s0 + i]
-            A[n, i] = c_row[s0 + i]
+            A[i, n] = -(jac[1, s0 + i] - fric * jac[0, s0 + i])
+            A[n, i] = jac[1, s0 + i]
+        A[n, n] = 0.0
         r[n] = gamma
-    x, piv = nb_lu_solve(A, r)
-    qdd = np.zeros(6)
-    for i in range(n):
-        qdd[s0 + i] = x[i]
-    fn = x[n] if nc == 1 else 0.0
-    return qdd, fn, sg, piv
+    piv = nb_lu_solve_inplace(A, r, n + nc)
+    for i in range(6):
+        qdd[i] = r[i - s0] if i >= s0 else 0.0
+    fn = r[n] if nc == 1 else 0.0
+    return fn, sg, piv
+
+
+@njit(cache=True)
+def nb_solve_mode(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps):
+    """Allocating form of :func:`nb_solve_mode_w`: returns (qdd (6,), f_n, s, pivot ratio)."""
+    W = nb_make_work()
+    fn, sg, piv = nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W)
+    return W[W_QDD].copy(), fn, sg, piv
 
 
 @njit(cache=True)
@@ -172,75 +226,88 @@ def nb_foot_split(sc, f1z, n1, foot_weight):
 
 
 @njit(cache=True)
-def nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, fd_h):
-    """Solve ``mode`` at (q, qd) and evaluate its contact forces and guards.
+def nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd_h, W, forces, g):
+    """Solve ``mode`` at (q, qd), then fill its contact forces and guards.
 
-    Returns:
-        qdd (6,), forces (5,) [N, N, N, N, m/s] (toe, heel, contact f_n, stance horizontal
-        force, slip speed), guards (9,) (index 0: transition guard; k >= 1: out-of-model
-        guard of EventCode k; +inf where not applicable), pivot ratio.
+    ``forces`` (5,): stance toe, stance heel, point contact f_n, stance horizontal force [N],
+    slip speed [m/s]. ``g`` (9,): index 0 the transition guard, k >= 1 the out-of-model guard
+    of EventCode k (+inf where not applicable). qdd is left in W[W_QDD]. Returns the pivot ratio.
     """
-    qdd, fn, sg, piv = nb_solve_mode(ch, sc, mode, q, qd, tau6, 0.0, fd_h, fopt[FO_SLIP_EPS])
+    fn, sg, piv = nb_solve_mode_w(ch, sc, mode, q, qd, tau6, 0.0, fd_h, fopt[FO_SLIP_EPS], W)
     col = CONTACT_COL[mode]
-    ext = np.zeros(2)
-    s_off = 0.0
+    K = W[W_K]
+    f = W[W_F]
+    nmom = W[W_N]
     link = -1
+    s_off = 0.0
+    fy = 0.0
+    fz = 0.0
+    slip = 0.0
     if col >= 0:
         link = 5
         s_off = sc[col]
-        ext[0] = -sc[SC_FRICTION] * sg * fn
-        ext[1] = fn
-    tau_id, f, nmom = nb_rnea_full(ch, q, qd, qdd, sc[SC_GRAVITY], link, s_off, ext)
-    kin = nb_forward_pass(ch, q, qd, np.zeros(6), root_y, 0.0)
-    phi, w, al, o = kin[0], kin[1], kin[2], kin[3]
-    forces = np.zeros(5)
+        fy = -sc[SC_FRICTION] * sg * fn
+        fz = fn
+        jac = W[W_JAC]  # still the contact Jacobian at q from the solve
+        for j in range(6):
+            slip += jac[0, j] * qd[j]
+    nb_fk(ch, q, qd, W[W_QDD], 0.0, K)
+    nb_rnea_backward(ch, K, sc[SC_GRAVITY], link, s_off, fy, fz, f, nmom)
     forces[FC_CONTACT] = fn
     forces[FC_STANCE_Y] = f[0, 0]
-    g = np.full(N_GUARDS, INF)
+    forces[FC_SLIP] = slip
+    for k in range(N_GUARDS):
+        g[k] = INF
     tol = fopt[FO_POS_TOL]
-    c5 = math.cos(phi[5])
-    s5 = math.sin(phi[5])
-    heel5_z = o[5, 1] + sc[SC_HEEL5] * s5
-    toe5_z = o[5, 1] + sc[SC_TOE5] * s5
-    if col >= 0:
-        jac = nb_point_jacobian(phi, o, 5, s_off)
-        v = 0.0
-        for j in range(6):
-            v += jac[0, j] * qd[j]
-        forces[FC_SLIP] = v
+    heel5_z = K[5, K_OZ] + sc[SC_HEEL5] * K[5, K_SIN]
+    toe5_z = K[5, K_OZ] + sc[SC_TOE5] * K[5, K_SIN]
     if ROOT_FREE[mode] == 0:
         f_heel, f_toe = nb_foot_split(sc, f[1, 1], nmom[1], iopt[IO_FOOT_WEIGHT] != 0)
         forces[FC_HEEL] = f_heel
         forces[FC_TOE] = f_toe
     else:
+        forces[FC_HEEL] = 0.0
         forces[FC_TOE] = f[0, 1]
     if mode == 1:
         g[0] = forces[FC_HEEL]
-        g[EventCode.STANCE_FOOT_TIPS_BACK] = forces[FC_TOE]
-        g[EventCode.SWING_FOOT_TOUCHDOWN] = min(heel5_z, toe5_z) + tol
+        g[G_TIPS_BACK] = forces[FC_TOE]
+        g[G_TOUCHDOWN] = min(heel5_z, toe5_z) + tol
     elif mode == 2 or mode == 3:
-        heel0_z = o[0, 1] + sc[SC_HEEL0] * math.sin(phi[0])
-        g[EventCode.STANCE_HEEL_DOWN] = heel0_z + tol
-        g[EventCode.STANCE_TOE_PULLS] = forces[FC_TOE]
+        heel0_z = K[0, K_OZ] + sc[SC_HEEL0] * K[0, K_SIN]
+        g[G_HEEL_DOWN] = heel0_z + tol
+        g[G_TOE_PULLS] = forces[FC_TOE]
         if mode == 2:
             g[0] = heel5_z
-            g[EventCode.SWING_TOE_STRIKE] = toe5_z + tol
+            g[G_TOE_STRIKE] = toe5_z + tol
         else:
-            g[0] = nb_wrap(phi[5])
-            g[EventCode.SWING_HEEL_PULLS] = fn
+            g[0] = nb_wrap(K[5, K_PHI])
+            g[G_HEEL_PULLS] = fn
     else:
         g[0] = fn
-        g[EventCode.STANCE_HEEL_DOWN] = heel5_z + tol
-        g[EventCode.STANCE_FOOT_PULLS] = min(forces[FC_HEEL], forces[FC_TOE])
+        g[G_HEEL_DOWN] = heel5_z + tol
+        g[G_FOOT_PULLS] = min(forces[FC_HEEL], forces[FC_TOE])
     zmin = INF
     for k in range(2, 6):  # knee, hip, knee, swing ankle (the stance ankle: heel-down guard)
-        zmin = min(zmin, o[k, 1])
-    g[EventCode.BODY_BELOW_GROUND] = zmin + tol
-    return qdd, forces, g, piv
+        zmin = min(zmin, K[k, K_OZ])
+    g[G_BELOW_GROUND] = zmin + tol
+    return piv
 
 
 @njit(cache=True)
-def nb_project(ch, sc, mode, q, qd):
+def nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, fd_h):
+    """Allocating form of :func:`nb_evaluate_w`: returns (qdd, forces, guards, pivot ratio).
+
+    ``root_y`` is accepted for symmetry with the state; guards and forces do not depend on it.
+    """
+    W = nb_make_work()
+    forces = np.zeros(N_FORCES)
+    g = np.empty(N_GUARDS)
+    piv = nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd_h, W, forces, g)
+    return W[W_QDD].copy(), forces, g, piv
+
+
+@njit(cache=True)
+def nb_project_w(ch, sc, mode, q, qd, W):
     """Project (q, qd) onto model ``mode``'s constraints in place.
 
     theta0 and its rate are set to zero in the flat-foot models; a point contact is brought
@@ -254,11 +321,13 @@ def nb_project(ch, sc, mode, q, qd):
     col = CONTACT_COL[mode]
     if col < 0:
         return
-    z6 = np.zeros(6)
+    K = W[W_K]
+    jac = W[W_JAC]
+    z6 = W[W_Z6]
     for _ in range(2):
-        phi, w, al, o, vo, ao = nb_forward_pass(ch, q, z6, z6, 0.0, 0.0)
-        pz = o[5, 1] + sc[col] * math.sin(phi[5])
-        jac = nb_point_jacobian(phi, o, 5, sc[col])
+        nb_fk(ch, q, z6, z6, 0.0, K)
+        pz = K[5, K_OZ] + sc[col] * K[5, K_SIN]
+        nb_jacobian_into_row(K, sc[col], jac)
         jj = 0.0
         for j in range(s0, 6):
             jj += jac[1, j] * jac[1, j]
@@ -266,24 +335,41 @@ def nb_project(ch, sc, mode, q, qd):
             return
         for j in range(s0, 6):
             q[j] -= jac[1, j] * pz / jj
-    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, z6, z6, 0.0, 0.0)
-    jac = nb_point_jacobian(phi, o, 5, sc[col])
+    nb_fk(ch, q, z6, z6, 0.0, K)
+    nb_jacobian_into_row(K, sc[col], jac)
     n = 6 - s0
-    M = nb_mass_matrix(ch, q)
-    Ms = np.empty((n, n))
-    jrow = np.empty(n)
+    M = W[W_M]
+    nb_crba(ch, K, M, W[W_TMP])
+    A = W[W_A]
+    x = W[W_R]
     for i in range(n):
-        jrow[i] = jac[1, s0 + i]
+        x[i] = jac[1, s0 + i]
         for j in range(n):
-            Ms[i, j] = M[s0 + i, s0 + j]
-    x, piv = nb_lu_solve(Ms, jrow)
+            A[i, j] = M[s0 + i, s0 + j]
+    nb_lu_solve_inplace(A, x, n)
     jx = 0.0
     jv = 0.0
     for i in range(n):
-        jx += jrow[i] * x[i]
-        jv += jrow[i] * qd[s0 + i]
+        jx += jac[1, s0 + i] * x[i]
+        jv += jac[1, s0 + i] * qd[s0 + i]
     for i in range(n):
         qd[s0 + i] -= x[i] * jv / jx
+
+
+@njit(cache=True)
+def nb_jacobian_into_row(K, s_off, jac):
+    """Point Jacobian of offset s_off on link 5 (the only link carrying point contacts)."""
+    py = K[5, K_OY] + s_off * K[5, K_COS]
+    pz = K[5, K_OZ] + s_off * K[5, K_SIN]
+    for j in range(6):
+        jac[0, j] = -(pz - K[j, K_OZ])
+        jac[1, j] = py - K[j, K_OY]
+
+
+@njit(cache=True)
+def nb_project(ch, sc, mode, q, qd):
+    """Allocating form of :func:`nb_project_w`."""
+    nb_project_w(ch, sc, mode, q, qd, nb_make_work())
 
 
 @njit(cache=True)
@@ -324,14 +410,12 @@ def nb_impact(ch, sc, reset, q, qd, impact):
     """
     if impact == IMPACT_PAPER:
         return np.zeros(6)
-    z6 = np.zeros(6)
-    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, z6, z6, 0.0, 0.0)
     if reset == 1:
-        jac = nb_point_jacobian(phi, o, 5, sc[SC_HEEL5])
+        jac = nb_point_jacobian(ch, q, 5, sc[SC_HEEL5])
         rows = np.empty((1, 6))
         rows[0] = jac[1]
     else:
-        jac = nb_point_jacobian(phi, o, 5, 0.0)
+        jac = nb_point_jacobian(ch, q, 5, 0.0)
         rows = np.empty((3, 6))
         rows[0] = jac[0]
         rows[1] = jac[1]

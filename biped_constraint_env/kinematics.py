@@ -34,103 +34,173 @@ KEYPOINT_NAMES: tuple[str, ...] = (
 N_KEYPOINTS = len(KEYPOINT_NAMES)
 
 
+# Columns of the kinematic table K (6, NK) filled by nb_fk: one row per link.
+K_PHI, K_COS, K_SIN, K_W, K_AL, K_OY, K_OZ, K_VY, K_VZ, K_AY, K_AZ = range(11)
+NK = 11
+
+
 @njit(cache=True)
-def nb_forward_pass(ch, q, qd, qdd, root_y, base_acc_z):
-    """Absolute angles, rates, accelerations and joint-origin kinematics of every link.
+def nb_fk(ch, q, qd, qdd, root_y, K):
+    """The one forward pass: fill the kinematic table K (6, NK) in place.
 
-    Args:
-        ch: (6, 6) packed chain.
-        q, qd, qdd: (6,) joint angles [rad], rates [rad/s], accelerations [rad/s^2].
-        root_y: world y of the chain root (stance toe) [m]; the root is at rest.
-        base_acc_z: upward acceleration given to the root [m/s^2] (g for the RNEA gravity trick,
-            0 for true kinematics).
-
-    Returns:
-        phi (6,), w (6,), al (6,): absolute angle [rad], rate [rad/s], acceleration [rad/s^2].
-        o, vo, ao: (6, 2) position [m], velocity [m/s] and acceleration [m/s^2] of joint i.
+    Row i holds link i's absolute angle phi_i [rad], cos and sin of it, rate w_i [rad/s],
+    acceleration al_i [rad/s^2], and joint i's origin o_i [m], its velocity [m/s] and its
+    acceleration [m/s^2] (y, z). The root (stance toe) is at (root_y, 0), at rest.
     """
-    phi = np.empty(N_LINKS)
-    w = np.empty(N_LINKS)
-    al = np.empty(N_LINKS)
-    o = np.zeros((N_LINKS, 2))
-    vo = np.zeros((N_LINKS, 2))
-    ao = np.zeros((N_LINKS, 2))
-    o[0, 0] = root_y
-    ao[0, 1] = base_acc_z
     a_prev = 0.0
     w_prev = 0.0
     al_prev = 0.0
     for i in range(N_LINKS):
-        phi[i] = a_prev + ch[i, COL_ANGLE] + q[i]
-        w[i] = w_prev + qd[i]
-        al[i] = al_prev + qdd[i]
-        if i > 0:
-            ry = ch[i - 1, COL_NEXT] * np.cos(phi[i - 1])
-            rz = ch[i - 1, COL_NEXT] * np.sin(phi[i - 1])
-            wp = w[i - 1]
-            o[i, 0] = o[i - 1, 0] + ry
-            o[i, 1] = o[i - 1, 1] + rz
-            vo[i, 0] = vo[i - 1, 0] - wp * rz
-            vo[i, 1] = vo[i - 1, 1] + wp * ry
-            ao[i, 0] = ao[i - 1, 0] - al[i - 1] * rz - wp * wp * ry
-            ao[i, 1] = ao[i - 1, 1] + al[i - 1] * ry - wp * wp * rz
-        a_prev = phi[i]
-        w_prev = w[i]
-        al_prev = al[i]
-    return phi, w, al, o, vo, ao
+        ph = a_prev + ch[i, COL_ANGLE] + q[i]
+        c = np.cos(ph)
+        sn = np.sin(ph)
+        K[i, K_PHI] = ph
+        K[i, K_COS] = c
+        K[i, K_SIN] = sn
+        K[i, K_W] = w_prev + qd[i]
+        K[i, K_AL] = al_prev + qdd[i]
+        if i == 0:
+            K[0, K_OY] = root_y
+            K[0, K_OZ] = 0.0
+            K[0, K_VY] = 0.0
+            K[0, K_VZ] = 0.0
+            K[0, K_AY] = 0.0
+            K[0, K_AZ] = 0.0
+        else:
+            ln = ch[i - 1, COL_NEXT]
+            ry = ln * K[i - 1, K_COS]
+            rz = ln * K[i - 1, K_SIN]
+            wp = K[i - 1, K_W]
+            alp = K[i - 1, K_AL]
+            K[i, K_OY] = K[i - 1, K_OY] + ry
+            K[i, K_OZ] = K[i - 1, K_OZ] + rz
+            K[i, K_VY] = K[i - 1, K_VY] - wp * rz
+            K[i, K_VZ] = K[i - 1, K_VZ] + wp * ry
+            K[i, K_AY] = K[i - 1, K_AY] - alp * rz - wp * wp * ry
+            K[i, K_AZ] = K[i - 1, K_AZ] + alp * ry - wp * wp * rz
+        a_prev = ph
+        w_prev = K[i, K_W]
+        al_prev = K[i, K_AL]
 
 
 @njit(cache=True)
-def nb_point_kinematics(phi, w, al, o, vo, ao, link, s):
-    """Position, velocity and acceleration (each (2,)) of the point at offset s [m] on a link."""
-    c = np.cos(phi[link])
-    sn = np.sin(phi[link])
-    ry = s * c
-    rz = s * sn
-    wl = w[link]
-    p = np.empty(2)
-    v = np.empty(2)
-    a = np.empty(2)
-    p[0] = o[link, 0] + ry
-    p[1] = o[link, 1] + rz
-    v[0] = vo[link, 0] - wl * rz
-    v[1] = vo[link, 1] + wl * ry
-    a[0] = ao[link, 0] - al[link] * rz - wl * wl * ry
-    a[1] = ao[link, 1] + al[link] * ry - wl * wl * rz
-    return p, v, a
+def nb_point(K, link, s):
+    """(py, pz, vy, vz, ay, az) of the point at offset s [m] on ``link`` (no allocation)."""
+    ry = s * K[link, K_COS]
+    rz = s * K[link, K_SIN]
+    wl = K[link, K_W]
+    al = K[link, K_AL]
+    return (
+        K[link, K_OY] + ry,
+        K[link, K_OZ] + rz,
+        K[link, K_VY] - wl * rz,
+        K[link, K_VZ] + wl * ry,
+        K[link, K_AY] - al * rz - wl * wl * ry,
+        K[link, K_AZ] + al * ry - wl * wl * rz,
+    )
 
 
 @njit(cache=True)
-def nb_point_jacobian(phi, o, link, s):
-    """(2, 6) Jacobian d(point)/dq of the point at offset s [m] on ``link``.
+def nb_jacobian_into(K, link, s, jac):
+    """Fill jac (2, 6) with the point Jacobian d(point)/dq of offset s on ``link``.
 
     Column j <= link is z x (p - o_j) = (-(p_z - o_jz), p_y - o_jy); later columns are zero.
     """
-    py = o[link, 0] + s * np.cos(phi[link])
-    pz = o[link, 1] + s * np.sin(phi[link])
-    jac = np.zeros((2, N_LINKS))
-    for j in range(link + 1):
-        jac[0, j] = -(pz - o[j, 1])
-        jac[1, j] = py - o[j, 0]
+    py = K[link, K_OY] + s * K[link, K_COS]
+    pz = K[link, K_OZ] + s * K[link, K_SIN]
+    for j in range(N_LINKS):
+        if j <= link:
+            jac[0, j] = -(pz - K[j, K_OZ])
+            jac[1, j] = py - K[j, K_OY]
+        else:
+            jac[0, j] = 0.0
+            jac[1, j] = 0.0
+
+
+@njit(cache=True)
+def nb_forward_pass(ch, q, qd, qdd, root_y, base_acc_z):
+    """Allocating view of :func:`nb_fk` as separate arrays (for the public API and tests).
+
+    Returns phi (6,), w (6,), al (6,), and o, vo, ao (6, 2): joint-origin position,
+    velocity and acceleration (ao with ``base_acc_z`` added to its z component).
+    """
+    K = np.empty((N_LINKS, NK))
+    nb_fk(ch, q, qd, qdd, root_y, K)
+    o = np.empty((N_LINKS, 2))
+    vo = np.empty((N_LINKS, 2))
+    ao = np.empty((N_LINKS, 2))
+    o[:, 0] = K[:, K_OY]
+    o[:, 1] = K[:, K_OZ]
+    vo[:, 0] = K[:, K_VY]
+    vo[:, 1] = K[:, K_VZ]
+    ao[:, 0] = K[:, K_AY]
+    ao[:, 1] = K[:, K_AZ] + base_acc_z
+    return K[:, K_PHI].copy(), K[:, K_W].copy(), K[:, K_AL].copy(), o, vo, ao
+
+
+@njit(cache=True)
+def nb_kin_point(ch, q, qd, link, s):
+    """(6,) position, velocity and zero-qdd acceleration (J-dot q-dot) of a point."""
+    K = np.empty((N_LINKS, NK))
+    nb_fk(ch, q, qd, np.zeros(N_LINKS), 0.0, K)
+    out = np.empty(6)
+    py, pz, vy, vz, ay, az = nb_point(K, link, s)
+    out[0] = py
+    out[1] = pz
+    out[2] = vy
+    out[3] = vz
+    out[4] = ay
+    out[5] = az
+    return out
+
+
+@njit(cache=True)
+def nb_point_jacobian(ch, q, link, s):
+    """(2, 6) point Jacobian at q (allocating)."""
+    K = np.empty((N_LINKS, NK))
+    z = np.zeros(N_LINKS)
+    nb_fk(ch, q, z, z, 0.0, K)
+    jac = np.empty((2, N_LINKS))
+    nb_jacobian_into(K, link, s, jac)
     return jac
+
+
+@njit(cache=True)
+def nb_keypoints_into(K, sc, out):
+    """Fill out (9, 2) with the keypoints named in KEYPOINT_NAMES from the table K."""
+    out[0, 0] = K[0, K_OY]
+    out[0, 1] = K[0, K_OZ]
+    out[1, 0] = K[0, K_OY] + sc[SC_HEEL0] * K[0, K_COS]
+    out[1, 1] = K[0, K_OZ] + sc[SC_HEEL0] * K[0, K_SIN]
+    for k in range(1, 6):
+        out[k + 1, 0] = K[k, K_OY]
+        out[k + 1, 1] = K[k, K_OZ]
+    out[7, 0] = K[5, K_OY] + sc[SC_HEEL5] * K[5, K_COS]
+    out[7, 1] = K[5, K_OZ] + sc[SC_HEEL5] * K[5, K_SIN]
+    out[8, 0] = K[5, K_OY] + sc[SC_TOE5] * K[5, K_COS]
+    out[8, 1] = K[5, K_OZ] + sc[SC_TOE5] * K[5, K_SIN]
 
 
 @njit(cache=True)
 def nb_keypoints(ch, sc, q, root_y):
     """(9, 2) world positions [m] of the keypoints named in KEYPOINT_NAMES."""
+    K = np.empty((N_LINKS, NK))
     z6 = np.zeros(N_LINKS)
-    phi, w, al, o, vo, ao = nb_forward_pass(ch, q, z6, z6, root_y, 0.0)
+    nb_fk(ch, q, z6, z6, root_y, K)
     out = np.empty((9, 2))
-    out[0] = o[0]
-    out[1, 0] = o[0, 0] + sc[SC_HEEL0] * np.cos(phi[0])
-    out[1, 1] = o[0, 1] + sc[SC_HEEL0] * np.sin(phi[0])
-    for k in range(1, 6):
-        out[k + 1] = o[k]
-    out[7, 0] = o[5, 0] + sc[SC_HEEL5] * np.cos(phi[5])
-    out[7, 1] = o[5, 1] + sc[SC_HEEL5] * np.sin(phi[5])
-    out[8, 0] = o[5, 0] + sc[SC_TOE5] * np.cos(phi[5])
-    out[8, 1] = o[5, 1] + sc[SC_TOE5] * np.sin(phi[5])
+    nb_keypoints_into(K, sc, out)
     return out
+
+
+@njit(cache=True)
+def nb_hip_kinematics(ch, q, qd, root_y, K):
+    """(y, z, vy, vz) of the hip (joint 3) [m, m/s], using K (6, NK) as scratch.
+
+    The accelerations left in K are those of qdd = qd (not meaningful); only positions and
+    velocities are read.
+    """
+    nb_fk(ch, q, qd, qd, root_y, K)
+    return K[3, K_OY], K[3, K_OZ], K[3, K_VY], K[3, K_VZ]
 
 
 def _vec6(name: str, x: object) -> np.ndarray:
@@ -160,33 +230,26 @@ def link_angles(q: np.ndarray) -> np.ndarray:
 def point_position(chain: ChainModel, q, link: int, s: float, root_y: float = 0.0) -> np.ndarray:
     """(2,) world position [m] of the point at offset ``s`` [m] along ``link``."""
     link, s = _link_offset(link, s)
-    z = np.zeros(N_LINKS)
-    phi, w, al, o, vo, ao = nb_forward_pass(chain.packed, _vec6("q", q), z, z, float(root_y), 0.0)
-    return nb_point_kinematics(phi, w, al, o, vo, ao, link, s)[0]
+    p = nb_kin_point(chain.packed, _vec6("q", q), np.zeros(N_LINKS), link, s)[:2]
+    return p + np.array([float(root_y), 0.0])
 
 
 def point_velocity(chain: ChainModel, q, qd, link: int, s: float) -> np.ndarray:
     """(2,) world velocity [m/s] of a link point (the root at rest)."""
     link, s = _link_offset(link, s)
-    z = np.zeros(N_LINKS)
-    out = nb_forward_pass(chain.packed, _vec6("q", q), _vec6("qd", qd), z, 0.0, 0.0)
-    return nb_point_kinematics(*out, link, s)[1]
+    return nb_kin_point(chain.packed, _vec6("q", q), _vec6("qd", qd), link, s)[2:4]
 
 
 def point_jacobian(chain: ChainModel, q, link: int, s: float) -> np.ndarray:
     """(2, 6) point Jacobian d p / d q [m/rad] of the point at offset ``s`` on ``link``."""
     link, s = _link_offset(link, s)
-    z = np.zeros(N_LINKS)
-    phi, w, al, o, vo, ao = nb_forward_pass(chain.packed, _vec6("q", q), z, z, 0.0, 0.0)
-    return nb_point_jacobian(phi, o, link, s)
+    return nb_point_jacobian(chain.packed, _vec6("q", q), link, s)
 
 
 def point_bias_acceleration(chain: ChainModel, q, qd, link: int, s: float) -> np.ndarray:
     """(2,) exact J-dot q-dot [m/s^2]: the point's acceleration at zero joint acceleration."""
     link, s = _link_offset(link, s)
-    z = np.zeros(N_LINKS)
-    out = nb_forward_pass(chain.packed, _vec6("q", q), _vec6("qd", qd), z, 0.0, 0.0)
-    return nb_point_kinematics(*out, link, s)[2]
+    return nb_kin_point(chain.packed, _vec6("q", q), _vec6("qd", qd), link, s)[4:6]
 
 
 def point_bias_acceleration_fd(chain: ChainModel, q, qd, link: int, s: float, h: float):

@@ -41,11 +41,14 @@ from .hybrid import (
     N_FOPT,
     N_FORCES,
     N_IOPT,
+    W_QDD,
     nb_evaluate,
+    nb_evaluate_w,
     nb_impact,
-    nb_project,
+    nb_make_work,
+    nb_project_w,
     nb_renumber,
-    nb_solve_mode,
+    nb_solve_mode_w,
 )
 from .integrators import EVALS_PER_STEP, Integrator, parse_integrator, tableau
 from .kinematics import KEYPOINT_NAMES, nb_keypoints
@@ -100,13 +103,13 @@ class SimOptions:
         max_switches: model switches allowed in one control period before ZENO is declared.
     """
 
-    integrator: str = "rk4"
-    substeps: int = 8
+    integrator: str = "rk2"
+    substeps: int = 4
     impact: str = "plastic"
     locate_events: bool = True
     jdot: str = "exact"
     strict: bool = True
-    heel_force_includes_foot_weight: bool = False
+    heel_force_includes_foot_weight: bool = True
     project_constraints: bool = True
     slip_eps_mps: float = 1e-3
     pos_tol_m: float = 1e-9
@@ -160,7 +163,10 @@ class SimOptions:
 
 
 DEFAULT_OPTIONS = SimOptions()
-"""Accurate defaults: RK4 x 8 substeps per 20 ms, located events, exact J-dot, strict, plastic."""
+"""Defaults: RK2 x 4 substeps per 20 ms (5 ms, inside RK2's stability limit 2/lambda ~ 7.7 ms),
+located events, exact J-dot, strict checks, plastic impacts, and the heel/toe split of the
+flat stance foot with the foot's weight included (the exact ground reaction, so that F_L <= 0
+agrees with the model-2 dynamics; README, Model)."""
 
 PAPER_OPTIONS = SimOptions(
     integrator="euler",
@@ -263,40 +269,94 @@ class StepResult(NamedTuple):
 # --------------------------------------------------------------------------- compiled core
 
 
+S_KQ, S_KV, S_QS, S_VS, S_Q1, S_QD1, S_QH, S_QDH, S_G, S_G1, S_TAU6, S_F, S_K1 = range(13)
+
+
 @njit(cache=True)
-def nb_integrate(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b):
-    """One integration step of length h [s] inside ``mode``; returns new (q, qd), projected."""
+def nb_make_scratch():
+    """Scratch arrays of the stepping loop (stages, trial states, guard vectors)."""
+    return (
+        np.zeros((4, 6)),  # kq: stage velocities
+        np.zeros((4, 6)),  # kv: stage accelerations
+        np.empty(6),  # stage q
+        np.empty(6),  # stage qd
+        np.empty(6),  # q after a step
+        np.empty(6),  # qd after a step
+        np.empty(6),  # q at the bracket's upper end (event location)
+        np.empty(6),  # qd at the bracket's upper end
+        np.empty(N_GUARDS),  # guards
+        np.empty(N_GUARDS),  # guards after a step
+        np.zeros(6),  # tau6
+        np.zeros(N_FORCES),  # forces scratch
+        np.zeros(6),  # qdd at the current start state (first RK stage, reused)
+    )
+
+
+@njit(cache=True)
+def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=False):
+    """One integration step of length h [s] inside ``mode``; result in S[S_Q1], S[S_QD1].
+
+    With ``use_k1`` the first explicit stage is taken from S[S_K1], the accelerations already
+    evaluated at (q, qd) with the same torques (first-same-as-last reuse).
+    """
     method = iopt[IO_INTEGRATOR]
     fd = h if iopt[IO_JDOT_FD] != 0 else 0.0
     eps = fopt[FO_SLIP_EPS]
+    q1 = S[S_Q1]
+    qd1 = S[S_QD1]
+    qdd = W[W_QDD]
     if method == SEMI_IMPLICIT:
-        qdd = nb_solve_mode(ch, sc, mode, q, qd, tau6, h, fd, eps)[0]
-        qd1 = qd + h * qdd
-        q1 = q + h * qd1
+        nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h, fd, eps, W)
+        for j in range(6):
+            qd1[j] = qd[j] + h * qdd[j]
+            q1[j] = q[j] + h * qd1[j]
     else:
         ns = N_STAGES[method]
-        kq = np.zeros((ns, 6))
-        kv = np.zeros((ns, 6))
-        for s in range(ns):
-            qs = q.copy()
-            vs = qd.copy()
-            for j in range(s):
-                if a[s, j] != 0.0:
-                    qs += (h * a[s, j]) * kq[j]
-                    vs += (h * a[s, j]) * kv[j]
-            kq[s] = vs
-            kv[s] = nb_solve_mode(ch, sc, mode, qs, vs, tau6, 0.0, fd, eps)[0]
-        q1 = q.copy()
-        qd1 = qd.copy()
-        for s in range(ns):
-            q1 += (h * b[s]) * kq[s]
-            qd1 += (h * b[s]) * kv[s]
+        kq = S[S_KQ]
+        kv = S[S_KV]
+        qs = S[S_QS]
+        vs = S[S_VS]
+        for st in range(ns):
+            for j in range(6):
+                qs[j] = q[j]
+                vs[j] = qd[j]
+            for k in range(st):
+                c = h * a[st, k]
+                if c != 0.0:
+                    for j in range(6):
+                        qs[j] += c * kq[k, j]
+                        vs[j] += c * kv[k, j]
+            if st == 0 and use_k1:
+                for j in range(6):
+                    kq[0, j] = qd[j]
+                    kv[0, j] = S[S_K1][j]
+                continue
+            nb_solve_mode_w(ch, sc, mode, qs, vs, tau6, 0.0, fd, eps, W)
+            for j in range(6):
+                kq[st, j] = vs[j]
+                kv[st, j] = qdd[j]
+        for j in range(6):
+            q1[j] = q[j]
+            qd1[j] = qd[j]
+        for st in range(ns):
+            c = h * b[st]
+            for j in range(6):
+                q1[j] += c * kq[st, j]
+                qd1[j] += c * kv[st, j]
     if iopt[IO_PROJECT] != 0:
-        nb_project(ch, sc, mode, q1, qd1)
+        nb_project_w(ch, sc, mode, q1, qd1, W)
     elif _RF[mode] == 0:
         q1[0] = 0.0
         qd1[0] = 0.0
-    return q1, qd1
+
+
+@njit(cache=True)
+def nb_integrate(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b):
+    """Allocating form of :func:`nb_integrate_w`: returns the new (q, qd)."""
+    W = nb_make_work()
+    S = nb_make_scratch()
+    nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S)
+    return S[S_Q1].copy(), S[S_QD1].copy()
 
 
 @njit(cache=True)
@@ -316,20 +376,32 @@ def _gmin(g, mask):
 
 
 @njit(cache=True)
-def nb_locate(ch, sc, mode, q, qd, tau6, root_y, h, mask, g_hi, q_hi, qd_hi, iopt, fopt, a, b):
-    """Earliest crossing in (0, h] of the guards in ``mask``; returns (theta, q, qd).
+def nb_locate_w(ch, sc, mode, q, qd, tau6, h, mask, iopt, fopt, a, b, W, S, use_k1):
+    """Earliest crossing in (0, h] of the guards in ``mask``; returns theta.
 
-    Illinois regula falsi on G(theta) = min_k g_k(x(theta)), where x(theta) is the integrator's
-    step of length theta h from (q, qd); the bracket is closed to ``time_tol_s``.
+    On entry S[S_G] holds the guards at the start state (q, qd), S[S_Q1], S[S_QD1] and S[S_G1]
+    the full step's end state and guards; on return S[S_QH], S[S_QDH] hold the state at
+    theta h. Illinois regula falsi (with a bisection every fourth iteration) on
+    G(theta) = min_k g_k(x(theta)), x(theta) being the integrator's step of length theta h from
+    (q, qd); the bracket is closed to ``time_tol_s``.
     """
     fd = h if iopt[IO_JDOT_FD] != 0 else 0.0
-    g0 = nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, fd)[2]
-    glo = _gmin(g0, mask)
-    ghi = _gmin(g_hi, mask)
+    qh = S[S_QH]
+    qdh = S[S_QDH]
+    for j in range(6):
+        qh[j] = S[S_Q1][j]
+        qdh[j] = S[S_QD1][j]
+    ghi = _gmin(S[S_G1], mask)
+    glo = _gmin(S[S_G], mask)
+    g = S[S_G1]
+    fo = S[S_F]
     lo = 0.0
     hi = 1.0
     if not glo > 0.0:
-        return 0.0, q.copy(), qd.copy()
+        for j in range(6):
+            qh[j] = q[j]
+            qdh[j] = qd[j]
+        return 0.0
     side = 0
     tol = fopt[FO_TIME_TOL] / h
     for it in range(MAX_LOCATE_ITERATIONS):
@@ -340,13 +412,15 @@ def nb_locate(ch, sc, mode, q, qd, tau6, root_y, h, mask, g_hi, q_hi, qd_hi, iop
         else:
             th = (lo * ghi - hi * glo) / (ghi - glo)
             th = min(max(th, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-        qt, qdt = nb_integrate(ch, sc, mode, q, qd, tau6, th * h, iopt, fopt, a, b)
-        gt = _gmin(nb_evaluate(ch, sc, mode, qt, qdt, tau6, root_y, iopt, fopt, fd)[2], mask)
+        nb_integrate_w(ch, sc, mode, q, qd, tau6, th * h, iopt, fopt, a, b, W, S, use_k1)
+        nb_evaluate_w(ch, sc, mode, S[S_Q1], S[S_QD1], tau6, iopt, fopt, fd, W, fo, g)
+        gt = _gmin(g, mask)
         if gt <= 0.0:
             hi = th
             ghi = gt
-            q_hi = qt
-            qd_hi = qdt
+            for j in range(6):
+                qh[j] = S[S_Q1][j]
+                qdh[j] = S[S_QD1][j]
             if side == -1:
                 glo *= 0.5
             side = -1
@@ -356,7 +430,7 @@ def nb_locate(ch, sc, mode, q, qd, tau6, root_y, h, mask, g_hi, q_hi, qd_hi, iop
             if side == 1:
                 ghi *= 0.5
             side = 1
-    return hi, q_hi, qd_hi
+    return hi
 
 
 @njit(cache=True)
@@ -372,7 +446,7 @@ def _record(ev, nev, t, code, mfrom, mto, terminal):
 
 
 @njit(cache=True)
-def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces):
+def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces, W, S):
     """Advance one simulator by one control period dt [s], in place.
 
     Args:
@@ -384,6 +458,7 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
         iopt, fopt, a, b: packed options and integrator tableau.
         ev: (MAX_EVENTS, 5) event buffer (t, code, from, to, terminal), filled from row 0.
         forces: (5,) output: contact forces at the final state.
+        W, S: workspace and scratch (nb_make_work, nb_make_scratch).
 
     Returns:
         (status, number of events): status 0 running, 1 terminated, 2 non-finite.
@@ -401,7 +476,15 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
     status = 0
     switches = 0
     check = True
-    tau6 = np.zeros(6)
+    tau6 = S[S_TAU6]
+    g = S[S_G]
+    g1 = S[S_G1]
+    fo = S[S_F]
+    k1 = S[S_K1]
+    # first-same-as-last: the accelerations of the last evaluation at the current state are
+    # the first stage of the next explicit step (not with the paper's finite-difference J-dot,
+    # whose sample length changes with the step, nor for the semi-implicit method)
+    reuse = iopt[IO_JDOT_FD] == 0 and iopt[IO_INTEGRATOR] != SEMI_IMPLICIT
     while True:
         ch = chs[side]
         sc = scs[side]
@@ -409,7 +492,9 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
             tau6[j + 1] = tau_table[mode - 1, j]
         k = -1
         if check:
-            g = nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, 0.0)[2]
+            nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, 0.0, W, fo, g)
+            for j in range(6):
+                k1[j] = W[W_QDD][j]
             for kk in EVENT_PRIORITY:
                 if _fired(g, kk, ignored):
                     k = kk
@@ -421,7 +506,9 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
             if t_end - t <= 1e-9 * dt:
                 break
             hh = min(h_nom, t_end - t)
-            q1, qd1 = nb_integrate(ch, sc, mode, q, qd, tau6, hh, iopt, fopt, a, b)
+            nb_integrate_w(ch, sc, mode, q, qd, tau6, hh, iopt, fopt, a, b, W, S, reuse)
+            q1 = S[S_Q1]
+            qd1 = S[S_QD1]
             finite = True
             for j in range(6):
                 if not (np.isfinite(q1[j]) and np.isfinite(qd1[j])):
@@ -430,27 +517,34 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
                 status = 2
                 break
             fd = hh if iopt[IO_JDOT_FD] != 0 else 0.0
-            g1 = nb_evaluate(ch, sc, mode, q1, qd1, tau6, root_y, iopt, fopt, fd)[2]
+            nb_evaluate_w(ch, sc, mode, q1, qd1, tau6, iopt, fopt, fd, W, fo, g1)
             mask = 0
             for kk in range(N_GUARDS):
                 if _fired(g1, kk, ignored):
                     mask |= 1 << kk
             if mask == 0:
-                q[:] = q1
-                qd[:] = qd1
+                for j in range(6):
+                    q[j] = q1[j]
+                    qd[j] = qd1[j]
+                    k1[j] = W[W_QDD][j]
+                for kk in range(N_GUARDS):
+                    g[kk] = g1[kk]
                 t += hh
                 continue
             if iopt[IO_LOCATE] != 0:
-                th, q1, qd1 = nb_locate(
-                    ch, sc, mode, q, qd, tau6, root_y, hh, mask, g1, q1, qd1, iopt, fopt, a, b
+                th = nb_locate_w(
+                    ch, sc, mode, q, qd, tau6, hh, mask, iopt, fopt, a, b, W, S, reuse
                 )
                 t += th * hh
-                g1 = nb_evaluate(ch, sc, mode, q1, qd1, tau6, root_y, iopt, fopt, fd)[2]
+                for j in range(6):
+                    q[j] = S[S_QH][j]
+                    qd[j] = S[S_QDH][j]
+                nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd, W, fo, g1)
             else:
                 t += hh
-            q[:] = q1
-            qd[:] = qd1
-            best = np.inf
+                for j in range(6):
+                    q[j] = q1[j]
+                    qd[j] = qd1[j]
             for kk in EVENT_PRIORITY:
                 if (mask >> kk) & 1 and g1[kk] <= 0.0:
                     k = kk
@@ -459,6 +553,7 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
                 if (mask & 1) and g1[0] <= 0.0:
                     k = 0
                 else:
+                    best = np.inf
                     for kk in range(N_GUARDS):
                         if (mask >> kk) & 1 and g1[kk] < best:
                             best = g1[kk]
@@ -484,7 +579,7 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
             if mode == 4:
                 steps += 1
             mode = succ
-            nb_project(chs[side], scs[side], mode, q, qd)
+            nb_project_w(chs[side], scs[side], mode, q, qd, W)
             ignored = 0
             switches += 1
             if switches > iopt[IO_MAX_SWITCHES]:
@@ -505,7 +600,7 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
     for j in range(5):
         tau6[j + 1] = tau_table[mode - 1, j]
     if status != 2:
-        forces[:] = nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, 0.0)[1]
+        nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, 0.0, W, forces, g)
     ist[ST_MODE] = mode
     ist[ST_SIDE] = side
     ist[ST_STEPS] = steps
@@ -516,14 +611,26 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
 
 
 @njit(cache=True)
+def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces):
+    """:func:`nb_advance_w` with a fresh workspace (one simulator, one control period)."""
+    return nb_advance_w(
+        chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces,
+        nb_make_work(), nb_make_scratch(),
+    )
+
+
+@njit(cache=True)
 def nb_advance_batch(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV):
-    """:func:`nb_advance` over N simulators (rows of every array); skips rows with STATUS != 0."""
+    """:func:`nb_advance_w` over N simulators (rows of every array); skips rows with STATUS != 0."""
+    W = nb_make_work()
+    S = nb_make_scratch()
     for i in range(Q.shape[0]):
         if STATUS[i] != 0:
             NEV[i] = 0
             continue
-        st, ne = nb_advance(
-            chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i], FORCES[i]
+        st, ne = nb_advance_w(
+            chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i],
+            FORCES[i], W, S,
         )
         STATUS[i] = st
         NEV[i] = ne
@@ -689,3 +796,62 @@ def integrate_mode(
     if not (np.all(np.isfinite(q1)) and np.all(np.isfinite(qd1))):
         raise SimulationError(f"non-finite state after one step of {h} s", state, table)
     return dataclasses.replace(state, t=state.t + h, q=q1, qd=qd1)
+
+
+class SimArrays:
+    """N simulator states in array form, stepped together by one compiled call.
+
+    The environments keep their state here (no per-step object construction); :meth:`get`
+    and :meth:`set` convert to and from :class:`SimState`. The physics is the same
+    :func:`nb_advance_w` that :func:`step` runs.
+    """
+
+    def __init__(self, n: int):
+        """Allocate arrays for ``n`` simulators."""
+        self.n = int(n)
+        self.q = np.zeros((n, N_LINKS))
+        self.qd = np.zeros((n, N_LINKS))
+        self.ist = np.zeros((n, 4), np.int64)
+        self.fst = np.zeros((n, 2))
+        self.events = np.zeros((n, MAX_EVENTS, 5))
+        self.n_events = np.zeros(n, np.int64)
+        self.forces = np.zeros((n, N_FORCES))
+        self.status = np.zeros(n, np.int64)
+
+    def set(self, i: int, state: SimState, forces: np.ndarray | None = None) -> None:
+        """Store ``state`` in slot i (status reset to running)."""
+        self.q[i] = state.q
+        self.qd[i] = state.qd
+        self.ist[i] = (int(state.mode), state.stance_side, state.steps_completed,
+                       state.recorded_violations)
+        self.fst[i] = (state.t, state.root_y)
+        self.status[i] = STATUS_OK
+        self.n_events[i] = 0
+        self.forces[i] = 0.0 if forces is None else forces
+
+    def get(self, i: int) -> SimState:
+        """The state in slot i as a :class:`SimState`."""
+        return SimState(
+            t=float(self.fst[i, FS_T]), mode=Mode(int(self.ist[i, ST_MODE])),
+            stance_side=int(self.ist[i, ST_SIDE]), q=self.q[i], qd=self.qd[i],
+            root_y=float(self.fst[i, FS_ROOT]), steps_completed=int(self.ist[i, ST_STEPS]),
+            recorded_violations=int(self.ist[i, ST_IGNORED]),
+        )
+
+    def events_of(self, i: int) -> tuple[Event, ...]:
+        """The events of slot i's last control period."""
+        return events_from_buffer(self.events[i], int(self.n_events[i]))
+
+
+def advance(params: BipedParams, arrays: SimArrays, tau_tables: np.ndarray, dt: float,
+            options: SimOptions = DEFAULT_OPTIONS) -> None:
+    """Advance every running slot of ``arrays`` by dt [s] under ``tau_tables`` (n, 4, 5) [N m].
+
+    Slots whose status is not 0 (terminated or non-finite) are left as they are. Inputs are
+    the caller's responsibility (the environments validate actions); the torques must be finite.
+    """
+    chs, scs = params.packed
+    iopt, fopt, a, b = options.packed
+    nb_advance_batch(chs, scs, arrays.q, arrays.qd, arrays.ist, arrays.fst, tau_tables, float(dt),
+                     iopt, fopt, a, b, arrays.events, arrays.forces, arrays.status,
+                     arrays.n_events)

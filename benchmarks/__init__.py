@@ -1,0 +1,1 @@
+"""Speed and accuracy studies (never asserted in tests)."""

@@ -1,0 +1,427 @@
+"""ConstrainedBiped-v0: a Gymnasium adapter over the four-model hybrid simulator."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numba import njit
+
+from .kinematics import NK, nb_hip_kinematics
+from .model import N_ACTUATED, N_LINKS, BipedParams, paper_biped
+from .modes import EventCode, Mode
+from .simulator import (
+    DEFAULT_OPTIONS,
+    PAPER_OPTIONS,
+    STATUS_NONFINITE,
+    STATUS_TERMINATED,
+    SimArrays,
+    SimOptions,
+    SimState,
+    advance,
+    evaluate,
+    keypoints,
+)
+from .units import PAPER_SAMPLE_TIME_S
+
+TORQUE_LIMIT_NM = 150.0
+"""Default action bound [N m] (>= 120 so that Table 2 fits)."""
+NOMINAL_POSTURE_RAD = (0.0, -0.1, 0.1, -0.3, -0.4, 0.7)
+"""Nominal model-1 posture q (theta0, q1..q5) [rad]: stance leg upright, swing leg back and
+bent, swing foot flat 0.41 m above the ground; at rest both ends of the stance foot push."""
+RESET_NOISE_SCALE_RAD = 0.01
+"""Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
+POSITION_TOLERANCE_M = 1e-9
+"""Penetration accepted when validating a reset state [m]."""
+OBS_DIM = 24
+OBS_NAMES: tuple[str, ...] = (
+    "theta0", "q1", "q2", "q3", "q4", "q5",
+    "theta0_dot", "q1_dot", "q2_dot", "q3_dot", "q4_dot", "q5_dot",
+    "hip_y_rel_stance_toe", "hip_z", "hip_vy", "hip_vz",
+    "stance_side",
+    "mode_1", "mode_2", "mode_3", "mode_4",
+    "f_stance_toe", "f_stance_heel", "f_contact_normal",
+)
+"""Observation entries, in order (see the env docstring's table)."""
+TERMINATION_NON_FINITE = "non_finite"
+
+PRESETS: dict[str, SimOptions] = {"default": DEFAULT_OPTIONS, "paper": PAPER_OPTIONS}
+"""Fidelity presets: the project's defaults, and the paper's own numerical choices."""
+
+
+@njit(cache=True)
+def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP):
+    """Fill OBS (n, 24) and HIP (n, 4: hip y, z, vy, vz) from the simulator arrays."""
+    K = np.empty((N_LINKS, NK))
+    for i in range(Q.shape[0]):
+        side = IST[i, 1]
+        mode = IST[i, 0]
+        hy, hz, hvy, hvz = nb_hip_kinematics(chs[side], Q[i], QD[i], FST[i, 1], K)
+        HIP[i, 0] = hy
+        HIP[i, 1] = hz
+        HIP[i, 2] = hvy
+        HIP[i, 3] = hvz
+        for j in range(6):
+            OBS[i, j] = Q[i, j]
+            OBS[i, 6 + j] = QD[i, j]
+        OBS[i, 12] = hy - FST[i, 1]
+        OBS[i, 13] = hz
+        OBS[i, 14] = hvy
+        OBS[i, 15] = hvz
+        OBS[i, 16] = side
+        for m in range(4):
+            OBS[i, 17 + m] = 1.0 if mode == m + 1 else 0.0
+        OBS[i, 21] = FORCES[i, 0]
+        OBS[i, 22] = FORCES[i, 1]
+        OBS[i, 23] = FORCES[i, 2]
+
+
+def observation_space() -> spaces.Box:
+    """The observation Box (bounds in the env docstring's table)."""
+    low = np.full(OBS_DIM, -np.inf, np.float32)
+    high = np.full(OBS_DIM, np.inf, np.float32)
+    low[:6], high[:6] = -np.pi, np.pi
+    low[16:21], high[16:21] = 0.0, 1.0
+    return spaces.Box(low, high, dtype=np.float64)
+
+
+def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOptions:
+    """The simulator options of a preset with per-option overrides (None = keep)."""
+    if preset not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
+    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a finite number > 0 [s], got {dt!r}")
+    changes = {k: v for k, v in overrides.items() if v is not None}
+    return PRESETS[preset].replace(**changes)
+
+
+def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
+    """(5,) float64 torques [N m] from an action; ValueError on NaN/inf/shape/dtype/range."""
+    a = action if isinstance(action, np.ndarray) else np.asarray(action)
+    if a.shape != (N_ACTUATED,):
+        raise ValueError(f"action must have shape ({N_ACTUATED},), got {a.shape}")
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"action must be real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64)
+    peak = np.abs(a).max()  # NaN propagates, so one reduction screens NaN, inf and range
+    if not peak <= limit:
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite, got {a}")
+        if out_of_range == "raise":
+            raise ValueError(f"action {a} exceeds the torque limit +-{limit} N m")
+        a = np.clip(a, -limit, limit)
+    return a
+
+
+def sample_initial_state(
+    rng: np.random.Generator, posture: np.ndarray, noise_scale: float
+) -> SimState:
+    """The nominal model-1 state with uniform noise in [-scale, scale] on q1..q5 [rad]."""
+    q = np.array(posture, dtype=np.float64)
+    q[1:] += rng.uniform(-noise_scale, noise_scale, size=N_LINKS - 1)
+    return SimState(t=0.0, mode=Mode.FOOT_FLAT, stance_side=0, q=q, qd=np.zeros(N_LINKS))
+
+
+def state_from_options(options: dict[str, Any]) -> SimState:
+    """A SimState from ``reset(options=...)`` keys q, qd, mode, stance_side, root_y."""
+    unknown = set(options) - {"q", "qd", "mode", "stance_side", "root_y"}
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {sorted(unknown)}")
+    if "q" not in options:
+        raise ValueError("reset options must contain 'q' (theta0, q1..q5) [rad]")
+    mode = options.get("mode", 1)
+    if mode not in (1, 2, 3, 4):
+        raise ValueError(f"mode must be one of 1, 2, 3, 4, got {mode!r}")
+    return SimState(
+        t=0.0, mode=Mode(int(mode)), stance_side=int(options.get("stance_side", 0)),
+        q=np.asarray(options["q"], dtype=np.float64),
+        qd=np.asarray(options.get("qd", np.zeros(N_LINKS)), dtype=np.float64),
+        root_y=float(options.get("root_y", 0.0)),
+    )
+
+
+def check_start_state(params: BipedParams, state: SimState) -> None:
+    """ValueError unless ``state`` is inside its model: feet on or above the ground, contacts held."""
+    pts = keypoints(params, state)
+    low = {k: v[1] for k, v in pts.items() if v[1] < -POSITION_TOLERANCE_M}
+    if low:
+        raise ValueError(f"reset state puts points below the ground (z [m]): {low}")
+    mode = state.mode
+    if mode in (Mode.FOOT_FLAT, Mode.DOUBLE_SUPPORT) and (state.q[0] != 0 or state.qd[0] != 0):
+        raise ValueError(f"model {int(mode)} holds the stance foot flat: theta0 and its rate must be 0")
+    if mode in (Mode.TOE_PIVOT, Mode.TOE_HEEL) and state.q[0] > 0:
+        raise ValueError("models 2-3 pivot on the stance toe: theta0 must be <= 0 (heel up)")
+    for m, name in ((Mode.TOE_HEEL, "swing_heel"), (Mode.DOUBLE_SUPPORT, "swing_toe")):
+        if mode == m and abs(pts[name][1]) > 1e-6:
+            raise ValueError(f"model {int(m)} holds the {name} at z = 0, got z = {pts[name][1]:.3g} m")
+
+
+def reward_terms(progress_m: float, dt: float, steps: int, tau: np.ndarray, limit: float,
+                 w_forward: float, w_step: float, w_ctrl: float) -> dict[str, float]:
+    """The reward terms of one control period (see the env docstring, Rewards)."""
+    return {
+        "reward_forward": w_forward * progress_m / dt,
+        "reward_step": w_step * steps,
+        "reward_ctrl": -w_ctrl * float(tau @ tau) / (limit * limit),
+    }
+
+
+class ConstrainedBipedEnv(gym.Env):
+    r"""Planar six-link biped whose ground contact is a constraint (Maeba et al. 2013).
+
+    ## Description
+    The robot of the paper "Bipedal Locomotion Model Based on Constraint Condition by
+    Newton-Euler Method": a serial chain of six rods (stance foot, shank, thigh, thigh, shank,
+    swing foot; 5 kg in all) in the vertical y-z plane, rooted at the stance toe. Its motion
+    switches among the paper's four models (1: stance foot flat; 2: stance toe pivot; 3: toe
+    + swing heel; 4: new stance foot flat + old toe), each with its own unknowns, solved by
+    the Newton-Euler method with the contacts as constraints (README, Model). One walking step
+    is the cycle 1 -> 2 -> 3 -> 4 -> 1; the legs swap roles at 3 -> 4. The agent applies the
+    five joint torques and should walk forward (+y) as far as it can without leaving the four
+    models. Conventions (angles, signs) are those of MODEL.md and the README.
+
+    ## Action Space
+    ``Box(-torque_limit_nm, torque_limit_nm, (5,), float32)``, torques in N m, held over
+    the control period ``dt``, in the *current* numbering (index 0 acts at the stance ankle).
+
+    | Num | joint | acts on (link i vs i-1)        | limit [N m] | sign |
+    |-----|-------|--------------------------------|-------------|------|
+    | 0   | 1     | stance shank vs stance foot    | 150         | + counter-clockwise on link i |
+    | 1   | 2     | stance thigh vs stance shank   | 150         | same |
+    | 2   | 3     | swing thigh vs stance thigh    | 150         | same |
+    | 3   | 4     | swing shank vs swing thigh     | 150         | same |
+    | 4   | 5     | swing foot vs swing shank      | 150         | same |
+
+    Out-of-range torques are clipped (``out_of_range="clip"``, default) or refused with a
+    ``ValueError`` (``"raise"``). NaN, inf, a wrong shape or a non-numeric dtype raise
+    ``ValueError``.
+
+    ## Observation Space
+    ``Box(shape=(24,), float64)``:
+
+    | Num | quantity | min | max | unit |
+    |-----|----------|-----|-----|------|
+    | 0-5 | theta0, q1..q5 (MODEL.md coordinates, current numbering) | -pi | pi | rad |
+    | 6-11 | their rates | -inf | inf | rad/s |
+    | 12 | hip y relative to the stance toe | -inf | inf | m |
+    | 13 | hip height z | -inf | inf | m |
+    | 14-15 | hip velocity (y, z) | -inf | inf | m/s |
+    | 16 | stance leg (0 = leg A, 1 = leg B) | 0 | 1 | - |
+    | 17-20 | model one-hot (paper models 1, 2, 3, 4) | 0 | 1 | - |
+    | 21 | stance toe vertical force (F_R in models 1, 4) | -inf | inf | N |
+    | 22 | stance heel vertical force (F_L in models 1, 4; 0 in 2, 3) | -inf | inf | N |
+    | 23 | point-contact normal force f_n (models 3, 4; else 0) | -inf | inf | N |
+
+    ``OBS_NAMES`` lists the entries; ``info["mode"]`` repeats the model number (1-4).
+
+    ## Rewards
+    ``reward = reward_forward + reward_step + reward_ctrl`` with
+    ``reward_forward = forward_reward_weight * (hip_y' - hip_y) / dt`` (hip progress),
+    ``reward_step = step_bonus * (walking steps completed in this period)`` and
+    ``reward_ctrl = -ctrl_cost_weight * sum((tau / torque_limit_nm)^2)``. Defaults 1.0, 5.0,
+    0.1. There is no fall penalty (it makes agents timid). ``info`` contains each term.
+
+    ## Starting State
+    Model 1, leg A standing, stance toe at y = 0, at rest, with
+    ``q = NOMINAL_POSTURE_RAD = (0, -0.1, 0.1, -0.3, -0.4, 0.7)`` rad plus uniform noise in
+    ``[-reset_noise_scale, reset_noise_scale]`` (default 0.01 rad) on q1..q5.
+    ``reset(options={"q": ..., "qd": ..., "mode": ..., "stance_side": ..., "root_y": ...})``
+    starts from any state in MODEL.md's coordinates (validated: points on or above the
+    ground, model constraints satisfied; a ``ValueError`` says what is wrong).
+
+    ## Episode End
+    ### Termination
+    Any out-of-model event of the simulator (``info["termination_reason"]`` names it):
+    ``stance_foot_tips_back``, ``stance_heel_down``, ``swing_toe_strike``,
+    ``swing_foot_touchdown``, ``body_below_ground``, ``swing_heel_pulls``,
+    ``stance_toe_pulls``, ``stance_foot_pulls`` (force events end the episode only with
+    ``strict=True``), ``step_behind_stance_toe``, ``zeno``, and ``non_finite`` (the
+    numerical state blew up; the observation is the last finite state). A fall is one of
+    these (a knee, the hip or an ankle below the ground).
+    ### Truncation
+    By the time limit only: ``max_episode_steps=1000`` control periods at registration.
+
+    ## Arguments
+    | Parameter | Type | Default | Description (unit) | affects |
+    |-----------|------|---------|--------------------|---------|
+    | params | BipedParams | paper_biped() | the robot | dynamics |
+    | preset | str | "default" | "default" or "paper" (the paper's numerics) | dynamics |
+    | dt | float | 0.02 | control period [s] | dynamics, reward |
+    | integrator, substeps, impact, locate_events, jdot, strict, heel_force_includes_foot_weight | | None | override one option of the preset (``SimOptions``) | dynamics |
+    | torque_limit_nm | float | 150 | action bound [N m] | action |
+    | out_of_range | str | "clip" | "clip" or "raise" | action |
+    | forward_reward_weight | float | 1.0 | per (m/s) of hip progress | reward |
+    | step_bonus | float | 5.0 | per completed walking step | reward |
+    | ctrl_cost_weight | float | 0.1 | per unit of sum((tau/limit)^2) | reward |
+    | reset_noise_scale | float | 0.01 | uniform noise on q1..q5 [rad] | start |
+    | posture | array (6,) | NOMINAL_POSTURE_RAD | nominal start posture [rad] | start |
+    | render_mode | str | None | "rgb_array" or "human" | render |
+
+    ## Version History
+    * v0: initial release.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import biped_constraint_env
+        >>> env = gym.make("ConstrainedBiped-v0")
+        >>> obs, info = env.reset(seed=0)
+        >>> obs.shape, info["mode"]
+        ((24,), 1)
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 50}
+
+    def __init__(
+        self,
+        params: BipedParams | None = None,
+        preset: str = "default",
+        dt: float = PAPER_SAMPLE_TIME_S,
+        integrator: str | None = None,
+        substeps: int | None = None,
+        impact: str | None = None,
+        locate_events: bool | None = None,
+        jdot: str | None = None,
+        strict: bool | None = None,
+        heel_force_includes_foot_weight: bool | None = None,
+        torque_limit_nm: float = TORQUE_LIMIT_NM,
+        out_of_range: str = "clip",
+        forward_reward_weight: float = 1.0,
+        step_bonus: float = 5.0,
+        ctrl_cost_weight: float = 0.1,
+        reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
+        posture=NOMINAL_POSTURE_RAD,
+        render_mode: str | None = None,
+    ):
+        """Create the environment (see the class docstring, Arguments)."""
+        self.params = params if params is not None else paper_biped()
+        self.dt = float(dt)
+        self.options = resolve_options(preset, dt, dict(
+            integrator=integrator, substeps=substeps, impact=impact, locate_events=locate_events,
+            jdot=jdot, strict=strict, heel_force_includes_foot_weight=heel_force_includes_foot_weight,
+        ))
+        if not (np.isfinite(torque_limit_nm) and torque_limit_nm > 0):
+            raise ValueError(f"torque_limit_nm must be finite and > 0, got {torque_limit_nm!r}")
+        if out_of_range not in ("clip", "raise"):
+            raise ValueError(f"out_of_range must be 'clip' or 'raise', got {out_of_range!r}")
+        for name, v in (("forward_reward_weight", forward_reward_weight), ("step_bonus", step_bonus),
+                        ("ctrl_cost_weight", ctrl_cost_weight), ("reset_noise_scale", reset_noise_scale)):
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.posture = np.asarray(posture, dtype=np.float64)
+        if self.posture.shape != (N_LINKS,):
+            raise ValueError(f"posture must have shape ({N_LINKS},), got {self.posture.shape}")
+        check_start_state(self.params, SimState(0.0, 1, 0, self.posture, np.zeros(N_LINKS)))
+        self.torque_limit_nm = float(torque_limit_nm)
+        self.out_of_range = out_of_range
+        self.weights = (float(forward_reward_weight), float(step_bonus), float(ctrl_cost_weight))
+        self.reset_noise_scale = float(reset_noise_scale)
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
+        self.action_space = spaces.Box(-self.torque_limit_nm, self.torque_limit_nm,
+                                       (N_ACTUATED,), np.float32)
+        self.observation_space = observation_space()
+        self._sim = SimArrays(1)
+        self._obs = np.zeros((1, OBS_DIM))
+        self._hip = np.zeros((1, 4))
+        self._tau_table = np.zeros((1, 4, N_ACTUATED))
+        self._renderer = None
+
+    # ---------------------------------------------------------------- state access
+    @property
+    def state(self) -> SimState:
+        """The simulator state (immutable snapshot)."""
+        return self._sim.get(0)
+
+    def keypoints(self) -> dict[str, np.ndarray]:
+        """World positions [m] of toes, heels, ankles, knees and hip of both legs, by name."""
+        return keypoints(self.params, self.state)
+
+    # ---------------------------------------------------------------- Gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode (see the class docstring, Starting State)."""
+        super().reset(seed=seed)
+        if options:
+            state = state_from_options(options)
+        else:
+            state = sample_initial_state(self.np_random, self.posture, self.reset_noise_scale)
+        check_start_state(self.params, state)
+        forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
+        self._sim.set(0, state, forces)
+        self._observe()
+        info = self._info(events=(), terms={"reward_forward": 0.0, "reward_step": 0.0,
+                                            "reward_ctrl": 0.0}, reason=None)
+        if self.render_mode == "human":
+            self.render()
+        return self._obs[0].copy(), info
+
+    def step(self, action):
+        """Apply the torques for one control period (see the class docstring)."""
+        tau = validate_action(action, self.torque_limit_nm, self.out_of_range)
+        if self._sim.status[0] != 0:
+            raise RuntimeError("step() called after the episode ended; call reset()")
+        hip_y0 = self._hip[0, 0]
+        steps0 = self._sim.ist[0, 2]
+        self._tau_table[0] = tau
+        advance(self.params, self._sim, self._tau_table, self.dt, self.options)
+        self._observe()
+        status = self._sim.status[0]
+        events = self._sim.events_of(0)
+        reason = None
+        if status == STATUS_TERMINATED:
+            reason = next(e.code.name.lower() for e in events if e.terminal)
+        elif status == STATUS_NONFINITE:
+            reason = TERMINATION_NON_FINITE
+        terms = reward_terms(self._hip[0, 0] - hip_y0, self.dt, int(self._sim.ist[0, 2] - steps0),
+                             tau, self.torque_limit_nm, *self.weights)
+        reward = terms["reward_forward"] + terms["reward_step"] + terms["reward_ctrl"]
+        info = self._info(events, terms, reason)
+        if self.render_mode == "human":
+            self.render()
+        return self._obs[0].copy(), reward, reason is not None, False, info
+
+    def _observe(self) -> None:
+        chs, scs = self.params.packed
+        s = self._sim
+        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip)
+
+    def _info(self, events, terms, reason) -> dict[str, Any]:
+        s = self._sim
+        return {
+            "mode": int(s.ist[0, 0]),
+            "stance_side": int(s.ist[0, 1]),
+            "steps_completed": int(s.ist[0, 2]),
+            "t": float(s.fst[0, 0]),
+            "hip_y": float(self._hip[0, 0]),
+            "switches": tuple((e.t, e.mode_from, e.mode_to) for e in events
+                              if e.code == EventCode.MODE_SWITCH),
+            "events": tuple((e.t, e.code.name.lower(), e.terminal) for e in events),
+            "termination_reason": reason,
+            **terms,
+        }
+
+    def render(self):
+        """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode")
+            return None
+        from .render import Renderer
+
+        if self._renderer is None:
+            self._renderer = Renderer()
+        st = self.state
+        frame = self._renderer.frame(self.keypoints(), int(st.mode), st.t, st.stance_side,
+                                     st.steps_completed)
+        if self.render_mode == "human":
+            self._renderer.show(frame, 1.0 / self.metadata["render_fps"])
+            return None
+        return frame
+
+    def close(self):
+        """Close the render window, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
