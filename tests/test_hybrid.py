@@ -64,7 +64,7 @@ def test_model1_heel_toe_split_matches_root_wrench(params):
     assert forces[1] == pytest.approx(f_heel, abs=1e-9)
     assert forces[0] + forces[1] == pytest.approx(res.joint_force[0, 1], abs=1e-9)
     # the paper's reading leaves the foot's weight out: each end carries m0 g / 2 less
-    paper = evaluate(params, st, tau)[1]
+    paper = evaluate(params, st, tau, opts.replace(heel_force_includes_foot_weight=False))[1]
     w = params.links[0].mass_kg * params.gravity_mps2
     assert paper[:2] == pytest.approx(forces[:2] - w / 2, abs=1e-9)
 
