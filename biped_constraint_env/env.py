@@ -23,6 +23,7 @@ from .simulator import (
     advance,
     evaluate,
     keypoints,
+    nb_start_batch,
 )
 from .units import PAPER_SAMPLE_TIME_S
 
@@ -97,10 +98,10 @@ def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOpt
     return PRESETS[preset].replace(**changes)
 
 
-def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
-    """(5,) float64 torques [N m] from an action; ValueError on NaN/inf/shape/dtype/range."""
-    a = action if isinstance(action, np.ndarray) else np.asarray(action)
-    if a.shape != (N_ACTUATED,):
+def validate_actions(actions: Any, limit: float, out_of_range: str) -> np.ndarray:
+    """(..., 5) float64 torques [N m]; ValueError on NaN/inf/shape/dtype/range (as documented)."""
+    a = actions if isinstance(actions, np.ndarray) else np.asarray(actions)
+    if a.shape[-1:] != (N_ACTUATED,):
         raise ValueError(f"action must have shape ({N_ACTUATED},), got {a.shape}")
     if a.dtype.kind not in "fiu":
         raise ValueError(f"action must be real numbers, got dtype {a.dtype}")
@@ -115,13 +116,36 @@ def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
     return a
 
 
-def sample_initial_state(
-    rng: np.random.Generator, posture: np.ndarray, noise_scale: float
-) -> SimState:
-    """The nominal model-1 state with uniform noise in [-scale, scale] on q1..q5 [rad]."""
+def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
+    """(5,) float64 torques [N m] from one action (see :func:`validate_actions`)."""
+    a = action if isinstance(action, np.ndarray) else np.asarray(action)
+    if a.shape != (N_ACTUATED,):
+        raise ValueError(f"action must have shape ({N_ACTUATED},), got {a.shape}")
+    return validate_actions(a, limit, out_of_range)
+
+
+def sample_initial_q(rng: np.random.Generator, posture: np.ndarray, noise_scale: float) -> np.ndarray:
+    """The nominal posture with uniform noise in [-scale, scale] on q1..q5 [rad]."""
     q = np.array(posture, dtype=np.float64)
     q[1:] += rng.uniform(-noise_scale, noise_scale, size=N_LINKS - 1)
-    return SimState(t=0.0, mode=Mode.FOOT_FLAT, stance_side=0, q=q, qd=np.zeros(N_LINKS))
+    return q
+
+
+def start_sampled(params: BipedParams, options: SimOptions, sim: SimArrays, idx: np.ndarray) -> None:
+    """Put slots ``idx`` (q already sampled) at rest in model 1, leg A standing, toe at y = 0.
+
+    Raises ValueError if a sampled posture puts a point below the ground.
+    """
+    sim.qd[idx] = 0.0
+    sim.ist[idx] = (int(Mode.FOOT_FLAT), 0, 0, 0)
+    sim.fst[idx] = 0.0
+    chs, scs = params.packed
+    iopt, fopt, _, _ = options.packed
+    low = nb_start_batch(chs, scs, sim.q, sim.qd, sim.ist, sim.fst, sim.forces, sim.status,
+                         sim.n_events, np.asarray(idx, np.int64), iopt, fopt)
+    if np.any(low < -POSITION_TOLERANCE_M):
+        raise ValueError(f"a sampled start posture is below the ground (lowest z {low.min():.3g} m); "
+                         "reduce reset_noise_scale or change the posture")
 
 
 def state_from_options(options: dict[str, Any]) -> SimState:
@@ -346,11 +370,12 @@ class ConstrainedBipedEnv(gym.Env):
         super().reset(seed=seed)
         if options:
             state = state_from_options(options)
+            check_start_state(self.params, state)
+            forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
+            self._sim.set(0, state, forces)
         else:
-            state = sample_initial_state(self.np_random, self.posture, self.reset_noise_scale)
-        check_start_state(self.params, state)
-        forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
-        self._sim.set(0, state, forces)
+            self._sim.q[0] = sample_initial_q(self.np_random, self.posture, self.reset_noise_scale)
+            start_sampled(self.params, self.options, self._sim, np.zeros(1, np.int64))
         self._observe()
         info = self._info(events=(), terms={"reward_forward": 0.0, "reward_step": 0.0,
                                             "reward_ctrl": 0.0}, reason=None)

@@ -19,6 +19,7 @@ import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numba import njit
 
@@ -636,6 +637,31 @@ def nb_advance_batch(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, F
         NEV[i] = ne
 
 
+@njit(cache=True, parallel=True)
+def nb_advance_batch_parallel(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES,
+                              STATUS, NEV, nt):
+    """:func:`nb_advance_batch` split into ``nt`` chunks, one per thread (same results)."""
+    n = Q.shape[0]
+    chunk = (n + nt - 1) // nt
+    for c in numba.prange(nt):
+        W = nb_make_work()
+        S = nb_make_scratch()
+        for i in range(c * chunk, min(n, (c + 1) * chunk)):
+            if STATUS[i] != 0:
+                NEV[i] = 0
+                continue
+            st, ne = nb_advance_w(
+                chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i],
+                FORCES[i], W, S,
+            )
+            STATUS[i] = st
+            NEV[i] = ne
+
+
+PARALLEL_MIN_BATCH = 8
+"""Batches at least this large are stepped by the multi-threaded kernel."""
+
+
 # --------------------------------------------------------------------------- public API
 
 
@@ -843,6 +869,29 @@ class SimArrays:
         return events_from_buffer(self.events[i], int(self.n_events[i]))
 
 
+@njit(cache=True)
+def nb_start_batch(chs, scs, Q, QD, IST, FST, FORCES, STATUS, NEV, idx, iopt, fopt):
+    """Prepare slots ``idx`` for a new episode; returns each slot's lowest keypoint z [m].
+
+    Computes the contact forces at zero torque (for the first observation) and clears the
+    status and event count. The caller rejects states whose lowest point is below ground.
+    """
+    W = nb_make_work()
+    g = np.empty(N_GUARDS)
+    tau6 = np.zeros(6)
+    low = np.empty(idx.shape[0])
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        side = IST[i, ST_SIDE]
+        pts = nb_keypoints(chs[side], scs[side], Q[i], FST[i, FS_ROOT])
+        low[k] = pts[:, 1].min()
+        nb_evaluate_w(chs[side], scs[side], IST[i, ST_MODE], Q[i], QD[i], tau6, iopt, fopt, 0.0,
+                      W, FORCES[i], g)
+        STATUS[i] = STATUS_OK
+        NEV[i] = 0
+    return low
+
+
 def advance(params: BipedParams, arrays: SimArrays, tau_tables: np.ndarray, dt: float,
             options: SimOptions = DEFAULT_OPTIONS) -> None:
     """Advance every running slot of ``arrays`` by dt [s] under ``tau_tables`` (n, 4, 5) [N m].
@@ -852,6 +901,9 @@ def advance(params: BipedParams, arrays: SimArrays, tau_tables: np.ndarray, dt: 
     """
     chs, scs = params.packed
     iopt, fopt, a, b = options.packed
-    nb_advance_batch(chs, scs, arrays.q, arrays.qd, arrays.ist, arrays.fst, tau_tables, float(dt),
-                     iopt, fopt, a, b, arrays.events, arrays.forces, arrays.status,
-                     arrays.n_events)
+    args = (chs, scs, arrays.q, arrays.qd, arrays.ist, arrays.fst, tau_tables, float(dt),
+            iopt, fopt, a, b, arrays.events, arrays.forces, arrays.status, arrays.n_events)
+    if arrays.n >= PARALLEL_MIN_BATCH and numba.get_num_threads() > 1:
+        nb_advance_batch_parallel(*args, numba.get_num_threads())
+    else:
+        nb_advance_batch(*args)

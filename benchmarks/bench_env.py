@@ -1,0 +1,80 @@
+"""Environment speed, side by side with Gymnasium's Walker2d-v5 (MuJoCo), in one run.
+
+    python -m benchmarks.bench_env
+
+Both envs are driven the same way: ``gym.make`` (default wrappers), a fixed sequence of
+seeded random actions scaled to 5% of the action bound, reset on termination/truncation
+(reset time included). Prints us per env.step, and env-steps/s of the batched vector env
+against Walker2d-v5's ``make_vec(..., vectorization_mode="sync")``, with the ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import biped_constraint_env  # noqa: F401  (registers ConstrainedBiped-v0)
+
+ACTION_FRACTION = 0.05  # random actions at 5% of the bound: episodes last tens of steps
+
+
+def per_step_us(env_id: str, n: int, seed: int = 0) -> float:
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    high = env.action_space.high
+    acts = (rng.uniform(-1, 1, (n, high.size)) * high * ACTION_FRACTION).astype(np.float32)
+    for k in range(min(n, 200)):
+        _, _, te, tr, _ = env.step(acts[k])
+        if te or tr:
+            env.reset()
+    t0 = time.perf_counter()
+    for k in range(n):
+        _, _, te, tr, _ = env.step(acts[k])
+        if te or tr:
+            env.reset()
+    dt = time.perf_counter() - t0
+    env.close()
+    return dt / n * 1e6
+
+
+def vec_steps_per_s(env_id: str, num_envs: int, mode: str, n: int, seed: int = 0) -> float:
+    venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode)
+    venv.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    high = venv.single_action_space.high
+    acts = (rng.uniform(-1, 1, (n, num_envs, high.size)) * high * ACTION_FRACTION).astype(np.float32)
+    for k in range(min(n, 50)):
+        venv.step(acts[k])
+    t0 = time.perf_counter()
+    for k in range(n):
+        venv.step(acts[k])
+    dt = time.perf_counter() - t0
+    venv.close()
+    return n * num_envs / dt
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=5000, help="env.step calls per timing")
+    ap.add_argument("--num-envs", type=int, default=64, help="sub-environments of the vector envs")
+    args = ap.parse_args(argv)
+    ours = per_step_us("ConstrainedBiped-v0", args.steps)
+    walker = per_step_us("Walker2d-v5", args.steps)
+    print(f"env.step via gym.make:   ConstrainedBiped-v0 {ours:8.1f} us | Walker2d-v5 {walker:8.1f} us"
+          f" | ratio {ours / walker:.3f} (target <= 0.25)")
+    n_vec = max(args.steps // args.num_envs, 20)
+    ours_b = vec_steps_per_s("ConstrainedBiped-v0", args.num_envs, "vector_entry_point", n_vec * 4)
+    ours_s = vec_steps_per_s("ConstrainedBiped-v0", args.num_envs, "sync", n_vec)
+    walker_s = vec_steps_per_s("Walker2d-v5", args.num_envs, "sync", n_vec)
+    print(f"vector env, {args.num_envs} envs:   ConstrainedBiped-v0 batched {ours_b:10.0f} steps/s | "
+          f"ConstrainedBiped-v0 sync {ours_s:8.0f} steps/s | Walker2d-v5 sync {walker_s:8.0f} steps/s")
+    print(f"ratio batched / Walker2d-v5 sync: {ours_b / walker_s:.1f} (target >= 20)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

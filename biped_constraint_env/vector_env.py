@@ -1,0 +1,168 @@
+"""Batched vector environment: N simulators stepped by one compiled call.
+
+``gym.make_vec("ConstrainedBiped-v0", num_envs=N, vectorization_mode="vector_entry_point")``
+creates it. It uses the same compiled simulator step, the same observation, reward, start-state
+and validation functions as :class:`~biped_constraint_env.env.ConstrainedBipedEnv`, so its
+trajectories equal those of N single environments seeded ``seed + i`` (Gymnasium's
+``SyncVectorEnv`` convention). Autoreset follows Gymnasium's ``NEXT_STEP`` mode: the step
+after an episode ends resets that sub-environment and ignores its action.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from .env import (
+    OBS_DIM,
+    TERMINATION_NON_FINITE,
+    ConstrainedBipedEnv,
+    check_start_state,
+    nb_observe,
+    sample_initial_q,
+    start_sampled,
+    state_from_options,
+    validate_actions,
+)
+from .model import N_ACTUATED
+from .simulator import STATUS_NONFINITE, STATUS_TERMINATED, SimArrays, advance, evaluate
+
+
+class ConstrainedBipedVectorEnv(VectorEnv):
+    """N ConstrainedBiped-v0 environments in one batch (arguments as the single env).
+
+    Args:
+        num_envs: number of sub-environments.
+        max_episode_steps: truncation after this many control periods (registration: 1000).
+        **kwargs: the single environment's keyword arguments (``render_mode`` excepted).
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000, **kwargs: Any):
+        """Create the batch; the single env validates the arguments."""
+        if kwargs.get("render_mode") is not None:
+            raise ValueError("the batched vector env does not render; use gym.make for that")
+        kwargs.pop("render_mode", None)
+        if not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be an int >= 1, got {num_envs!r}")
+        self._proto = ConstrainedBipedEnv(**kwargs)  # validation and settings, never stepped
+        self.num_envs = num_envs
+        self.max_episode_steps = max_episode_steps
+        self.single_action_space = self._proto.action_space
+        self.single_observation_space = self._proto.observation_space
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.params = self._proto.params
+        self.options = self._proto.options
+        self.dt = self._proto.dt
+        self._sim = SimArrays(num_envs)
+        self._obs = np.zeros((num_envs, OBS_DIM))
+        self._hip = np.zeros((num_envs, 4))
+        self._tau = np.zeros((num_envs, 4, N_ACTUATED))
+        self._elapsed = np.zeros(num_envs, np.int64)
+        self._autoreset = np.zeros(num_envs, bool)
+        self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(num_envs)]
+
+    def _reset_slots(self, idx: np.ndarray) -> None:
+        """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
+        p = self._proto
+        s = self._sim
+        for i in idx:
+            s.q[i] = sample_initial_q(self._rngs[i], p.posture, p.reset_noise_scale)
+        start_sampled(self.params, self.options, s, idx)
+        self._elapsed[idx] = 0
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
+        """Reset every sub-environment; ``seed`` s seeds sub-environment i with s + i."""
+        if seed is not None:
+            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"expected {self.num_envs} seeds, got {len(seeds)}")
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        if options:
+            state = state_from_options(options)
+            check_start_state(self.params, state)
+            for i in range(self.num_envs):
+                self._sim.set(i, state, evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1])
+            self._elapsed[:] = 0
+        else:
+            self._reset_slots(np.arange(self.num_envs))
+        self._autoreset[:] = False
+        self._observe()
+        return self._obs.copy(), self._infos(np.zeros(self.num_envs), None)
+
+    def step(self, actions):
+        """Step every sub-environment (autoreset on the step after an episode ends)."""
+        actions = np.asarray(actions)
+        if actions.shape != (self.num_envs, N_ACTUATED):
+            raise ValueError(
+                f"actions must have shape ({self.num_envs}, {N_ACTUATED}), got {actions.shape}"
+            )
+        p = self._proto
+        tau = validate_actions(actions, p.torque_limit_nm, p.out_of_range)
+        resetting = np.flatnonzero(self._autoreset)
+        if resetting.size:
+            self._reset_slots(resetting)
+        self._sim.status[resetting] = -1  # skipped by the batch step this period
+        hip0 = self._hip[:, 0].copy()
+        steps0 = self._sim.ist[:, 2].copy()
+        self._tau[:] = tau[:, None, :]
+        advance(self.params, self._sim, self._tau, self.dt, self.options)
+        self._sim.status[resetting] = 0
+        self._sim.n_events[resetting] = 0
+        self._observe()
+        w_fwd, w_step, w_ctrl = p.weights
+        lim = p.torque_limit_nm
+        r_fwd = w_fwd * (self._hip[:, 0] - hip0) / self.dt
+        r_step = w_step * (self._sim.ist[:, 2] - steps0)
+        r_ctrl = -w_ctrl * np.einsum("ij,ij->i", tau, tau) / (lim * lim)
+        r_fwd[resetting] = r_step[resetting] = r_ctrl[resetting] = 0.0
+        rewards = r_fwd + r_step + r_ctrl
+        status = self._sim.status
+        terminated = (status == STATUS_TERMINATED) | (status == STATUS_NONFINITE)
+        self._elapsed += 1
+        self._elapsed[resetting] = 0
+        truncated = np.zeros(self.num_envs, bool)
+        if self.max_episode_steps is not None:
+            truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
+        self._autoreset = terminated | truncated
+        infos = self._infos(np.zeros(self.num_envs), (r_fwd, r_step, r_ctrl))
+        return self._obs.copy(), rewards, terminated, truncated, infos
+
+    def _observe(self) -> None:
+        chs, scs = self.params.packed
+        s = self._sim
+        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip)
+
+    def _infos(self, zeros: np.ndarray, terms) -> dict[str, Any]:
+        s = self._sim
+        reasons = np.full(self.num_envs, None, dtype=object)
+        for i in np.flatnonzero(s.status > 0):
+            if s.status[i] == STATUS_NONFINITE:
+                reasons[i] = TERMINATION_NON_FINITE
+            else:
+                reasons[i] = next(e.code.name.lower() for e in s.events_of(int(i)) if e.terminal)
+        r_fwd, r_step, r_ctrl = terms if terms is not None else (zeros, zeros, zeros)
+        info = {
+            "mode": s.ist[:, 0].copy(),
+            "stance_side": s.ist[:, 1].copy(),
+            "steps_completed": s.ist[:, 2].copy(),
+            "t": s.fst[:, 0].copy(),
+            "hip_y": self._hip[:, 0].copy(),
+            "termination_reason": reasons,
+            "reward_forward": r_fwd,
+            "reward_step": r_step,
+            "reward_ctrl": r_ctrl,
+        }
+        everyone = np.ones(self.num_envs, bool)
+        info.update({f"_{k}": everyone for k in list(info)})
+        return info
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Nothing to release."""
