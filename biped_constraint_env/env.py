@@ -36,6 +36,15 @@ RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 POSITION_TOLERANCE_M = 1e-9
 """Penetration accepted when validating a reset state [m]."""
+OBS_RATE_LIMIT_RAD_S = 1e3
+"""Bound of the joint-rate observations [rad/s] (values beyond are clipped; with the damping of
+10 N m s/rad and 150 N m torques, steady rates stay below ~50 rad/s)."""
+OBS_LENGTH_LIMIT_M = 10.0
+"""Bound of the hip-position observations [m] (the legs are 3 m long)."""
+OBS_SPEED_LIMIT_M_S = 1e3
+"""Bound of the hip-velocity observations [m/s]."""
+OBS_FORCE_LIMIT_N = 1e5
+"""Bound of the contact-force observations [N] (the robot weighs 49 N)."""
 OBS_DIM = 24
 OBS_NAMES: tuple[str, ...] = (
     "theta0", "q1", "q2", "q3", "q4", "q5",
@@ -52,9 +61,25 @@ PRESETS: dict[str, SimOptions] = {"default": DEFAULT_OPTIONS, "paper": PAPER_OPT
 """Fidelity presets: the project's defaults, and the paper's own numerical choices."""
 
 
+def _obs_bounds() -> tuple[np.ndarray, np.ndarray]:
+    high = np.empty(OBS_DIM)
+    high[:6] = np.pi
+    high[6:12] = OBS_RATE_LIMIT_RAD_S
+    high[12:14] = OBS_LENGTH_LIMIT_M
+    high[14:16] = OBS_SPEED_LIMIT_M_S
+    high[16:21] = 1.0
+    high[21:24] = OBS_FORCE_LIMIT_N
+    low = -high
+    low[16:21] = 0.0
+    return low, high
+
+
+OBS_LOW, OBS_HIGH = _obs_bounds()
+
+
 @njit(cache=True)
-def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP):
-    """Fill OBS (n, 24) and HIP (n, 4: hip y, z, vy, vz) from the simulator arrays."""
+def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
+    """Fill OBS (n, 24), clipped to [low, high], and HIP (n, 4: hip y, z, vy, vz)."""
     K = np.empty((N_LINKS, NK))
     for i in range(Q.shape[0]):
         side = IST[i, 1]
@@ -77,15 +102,13 @@ def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP):
         OBS[i, 21] = FORCES[i, 0]
         OBS[i, 22] = FORCES[i, 1]
         OBS[i, 23] = FORCES[i, 2]
+        for j in range(OBS.shape[1]):
+            OBS[i, j] = min(max(OBS[i, j], low[j]), high[j])
 
 
 def observation_space() -> spaces.Box:
     """The observation Box (bounds in the env docstring's table)."""
-    low = np.full(OBS_DIM, -np.inf, np.float32)
-    high = np.full(OBS_DIM, np.inf, np.float32)
-    low[:6], high[:6] = -np.pi, np.pi
-    low[16:21], high[16:21] = 0.0, 1.0
-    return spaces.Box(low, high, dtype=np.float64)
+    return spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float64)
 
 
 def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOptions:
@@ -182,14 +205,21 @@ def check_start_state(params: BipedParams, state: SimState) -> None:
             raise ValueError(f"model {int(m)} holds the {name} at z = 0, got z = {pts[name][1]:.3g} m")
 
 
-def reward_terms(progress_m: float, dt: float, steps: int, tau: np.ndarray, limit: float,
-                 w_forward: float, w_step: float, w_ctrl: float) -> dict[str, float]:
-    """The reward terms of one control period (see the env docstring, Rewards)."""
-    return {
-        "reward_forward": w_forward * progress_m / dt,
-        "reward_step": w_step * steps,
-        "reward_ctrl": -w_ctrl * float(tau @ tau) / (limit * limit),
-    }
+def reward_terms(progress_m: np.ndarray, dt: float, steps: np.ndarray, tau: np.ndarray,
+                 limit: float, w_forward: float, w_step: float,
+                 w_ctrl: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(forward, step, ctrl) reward terms of one control period for n envs (see Rewards).
+
+    Args:
+        progress_m: (n,) hip progress [m]. dt: control period [s]. steps: (n,) walking steps
+            completed in the period. tau: (n, 5) applied torques [N m]. limit: torque bound.
+        w_forward, w_step, w_ctrl: the weights.
+    """
+    return (
+        w_forward * progress_m / dt,
+        w_step * steps,
+        -w_ctrl * np.sum(tau * tau, axis=1) / (limit * limit),
+    )
 
 
 class ConstrainedBipedEnv(gym.Env):
@@ -228,17 +258,20 @@ class ConstrainedBipedEnv(gym.Env):
     | Num | quantity | min | max | unit |
     |-----|----------|-----|-----|------|
     | 0-5 | theta0, q1..q5 (MODEL.md coordinates, current numbering) | -pi | pi | rad |
-    | 6-11 | their rates | -inf | inf | rad/s |
-    | 12 | hip y relative to the stance toe | -inf | inf | m |
-    | 13 | hip height z | -inf | inf | m |
-    | 14-15 | hip velocity (y, z) | -inf | inf | m/s |
+    | 6-11 | their rates | -1e3 | 1e3 | rad/s |
+    | 12 | hip y relative to the stance toe | -10 | 10 | m |
+    | 13 | hip height z | -10 | 10 | m |
+    | 14-15 | hip velocity (y, z) | -1e3 | 1e3 | m/s |
     | 16 | stance leg (0 = leg A, 1 = leg B) | 0 | 1 | - |
     | 17-20 | model one-hot (paper models 1, 2, 3, 4) | 0 | 1 | - |
-    | 21 | stance toe vertical force (F_R in models 1, 4) | -inf | inf | N |
-    | 22 | stance heel vertical force (F_L in models 1, 4; 0 in 2, 3) | -inf | inf | N |
-    | 23 | point-contact normal force f_n (models 3, 4; else 0) | -inf | inf | N |
+    | 21 | stance toe vertical force (F_R in models 1, 4) | -1e5 | 1e5 | N |
+    | 22 | stance heel vertical force (F_L in models 1, 4; 0 in 2, 3) | -1e5 | 1e5 | N |
+    | 23 | point-contact normal force f_n (models 3, 4; else 0) | -1e5 | 1e5 | N |
 
-    ``OBS_NAMES`` lists the entries; ``info["mode"]`` repeats the model number (1-4).
+    The bounds are the named constants ``OBS_RATE_LIMIT_RAD_S``, ``OBS_LENGTH_LIMIT_M``,
+    ``OBS_SPEED_LIMIT_M_S`` and ``OBS_FORCE_LIMIT_N``; values beyond them (far outside walking)
+    are clipped to them. ``OBS_NAMES`` lists the entries; ``info["mode"]`` repeats the model
+    number (1-4).
 
     ## Rewards
     ``reward = reward_forward + reward_step + reward_ctrl`` with
@@ -400,9 +433,13 @@ class ConstrainedBipedEnv(gym.Env):
             reason = next(e.code.name.lower() for e in events if e.terminal)
         elif status == STATUS_NONFINITE:
             reason = TERMINATION_NON_FINITE
-        terms = reward_terms(self._hip[0, 0] - hip_y0, self.dt, int(self._sim.ist[0, 2] - steps0),
-                             tau, self.torque_limit_nm, *self.weights)
-        reward = terms["reward_forward"] + terms["reward_step"] + terms["reward_ctrl"]
+        r_fwd, r_step, r_ctrl = reward_terms(
+            self._hip[:, 0] - hip_y0, self.dt, self._sim.ist[:, 2] - steps0, tau[None, :],
+            self.torque_limit_nm, *self.weights,
+        )
+        terms = {"reward_forward": float(r_fwd[0]), "reward_step": float(r_step[0]),
+                 "reward_ctrl": float(r_ctrl[0])}
+        reward = float((r_fwd + r_step + r_ctrl)[0])
         info = self._info(events, terms, reason)
         if self.render_mode == "human":
             self.render()
@@ -411,7 +448,8 @@ class ConstrainedBipedEnv(gym.Env):
     def _observe(self) -> None:
         chs, scs = self.params.packed
         s = self._sim
-        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip)
+        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW,
+                   OBS_HIGH)
 
     def _info(self, events, terms, reason) -> dict[str, Any]:
         s = self._sim

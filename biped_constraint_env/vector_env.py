@@ -20,10 +20,13 @@ from gymnasium.vector.utils import batch_space
 
 from .env import (
     OBS_DIM,
+    OBS_HIGH,
+    OBS_LOW,
     TERMINATION_NON_FINITE,
     ConstrainedBipedEnv,
     check_start_state,
     nb_observe,
+    reward_terms,
     sample_initial_q,
     start_sampled,
     state_from_options,
@@ -117,11 +120,11 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._sim.status[resetting] = 0
         self._sim.n_events[resetting] = 0
         self._observe()
-        w_fwd, w_step, w_ctrl = p.weights
-        lim = p.torque_limit_nm
-        r_fwd = w_fwd * (self._hip[:, 0] - hip0) / self.dt
-        r_step = w_step * (self._sim.ist[:, 2] - steps0)
-        r_ctrl = -w_ctrl * np.einsum("ij,ij->i", tau, tau) / (lim * lim)
+        r_fwd, r_step, r_ctrl = reward_terms(
+            self._hip[:, 0] - hip0, self.dt, self._sim.ist[:, 2] - steps0, tau,
+            p.torque_limit_nm, *p.weights,
+        )
+        r_step = r_step.astype(np.float64)
         r_fwd[resetting] = r_step[resetting] = r_ctrl[resetting] = 0.0
         rewards = r_fwd + r_step + r_ctrl
         status = self._sim.status
@@ -138,7 +141,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def _observe(self) -> None:
         chs, scs = self.params.packed
         s = self._sim
-        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip)
+        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW,
+                   OBS_HIGH)
 
     def _infos(self, zeros: np.ndarray, terms) -> dict[str, Any]:
         s = self._sim
