@@ -1,0 +1,129 @@
+"""Shared plumbing of the training scripts: config dataclass <-> TOML <-> argparse, run dirs.
+
+Precedence: dataclass defaults < ``--config file.toml`` < command-line flags. Flags are
+generated from the dataclass fields (``--total-timesteps 256``); tuples take several values.
+A run directory ``runs/<script>/<env_id>__seed<seed>__<YYYYmmdd-HHMMSS>/`` is created fresh
+(never overwritten) and receives ``config.toml``, ``command.txt`` and ``versions.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime as _dt
+import json
+import platform
+import subprocess
+import sys
+import tomllib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TypeVar, get_type_hints
+
+C = TypeVar("C")
+
+
+def _coerce(kind: Any, value: Any, name: str) -> Any:
+    if kind is bool:
+        if isinstance(value, bool):
+            return value
+        if str(value).lower() in ("1", "true", "yes"):
+            return True
+        if str(value).lower() in ("0", "false", "no"):
+            return False
+        raise ValueError(f"{name} must be true or false, got {value!r}")
+    if kind is Path:
+        return Path(value)
+    if getattr(kind, "__origin__", None) is tuple:
+        (elem, *_) = kind.__args__
+        return tuple(elem(v) for v in value)
+    if kind is int and isinstance(value, float) and not value.is_integer():
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    return kind(value)
+
+
+def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> C:
+    """Build ``cls`` from defaults, an optional TOML file and CLI flags (in that precedence)."""
+    hints = get_type_hints(cls)
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--config", type=Path, help="TOML file of field = value pairs")
+    for f in dataclasses.fields(cls):
+        flag = "--" + f.name.replace("_", "-")
+        kind = hints[f.name]
+        if getattr(kind, "__origin__", None) is tuple:
+            parser.add_argument(flag, nargs="+", default=None, help=f"(default {f.default})")
+        else:
+            parser.add_argument(flag, default=None, help=f"(default {f.default})")
+    args = parser.parse_args(argv)
+    values: dict[str, Any] = {}
+    if args.config is not None:
+        with open(args.config, "rb") as fh:
+            data = tomllib.load(fh)
+        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise ValueError(f"{args.config}: unknown keys {sorted(unknown)}")
+        values.update(data)
+    for f in dataclasses.fields(cls):
+        v = getattr(args, f.name)
+        if v is not None:
+            values[f.name] = v
+    kwargs = {k: _coerce(hints[k], v, k) for k, v in values.items()}
+    return cls(**kwargs)
+
+
+def to_toml(cfg: Any) -> str:
+    """Resolved config as TOML text (flat; strings, numbers, booleans, paths, tuples)."""
+    lines = []
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if isinstance(v, Path):
+            v = str(v)
+        lines.append(f"{f.name} = {json.dumps(list(v) if isinstance(v, tuple) else v)}")
+    return "\n".join(lines) + "\n"
+
+
+def versions() -> dict[str, str]:
+    """Package versions and the git commit, for the run directory."""
+    out = {"python": platform.python_version()}
+    for name in ("numpy", "numba", "gymnasium", "stable_baselines3", "torch", "biped_constraint_env"):
+        try:
+            mod = __import__(name)
+            out[name] = getattr(mod, "__version__", "?")
+        except ImportError:
+            out[name] = "not installed"
+    try:
+        out["git_commit"] = subprocess.run(
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True,
+            cwd=Path(__file__).resolve().parent,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        out["git_commit"] = "unknown"
+    return out
+
+
+def make_run_dir(out_dir: Path, script: str, env_id: str, seed: int, cfg: Any,
+                 argv: Sequence[str] | None) -> Path:
+    """Create a fresh run directory and write config.toml, command.txt and versions.json."""
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    run = Path(out_dir) / script / f"{env_id}__seed{seed}__{stamp}"
+    suffix = 1
+    while run.exists():
+        run = Path(out_dir) / script / f"{env_id}__seed{seed}__{stamp}-{suffix}"
+        suffix += 1
+    (run / "figures").mkdir(parents=True)
+    (run / "config.toml").write_text(to_toml(cfg))
+    cmd = [sys.executable, "-m", f"training.{script}", *(sys.argv[1:] if argv is None else argv)]
+    (run / "command.txt").write_text(" ".join(cmd) + "\n")
+    (run / "versions.json").write_text(json.dumps(versions(), indent=2) + "\n")
+    return run
+
+
+def progress(iterable, total: int | None = None, desc: str = "", enabled: bool = True):
+    """A tqdm progress bar when tqdm is installed and enabled, else the iterable itself."""
+    if not enabled:
+        return iterable
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return iterable
+    return tqdm(iterable, total=total, desc=desc, mininterval=1.0)

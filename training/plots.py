@@ -1,0 +1,79 @@
+"""Figures shared by the training scripts (matplotlib and Pillow, imported lazily)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+SEGMENTS = (
+    ("stance_toe", "stance_heel"), ("stance_heel", "stance_ankle"), ("stance_ankle", "stance_toe"),
+    ("stance_ankle", "stance_knee"), ("stance_knee", "hip"), ("hip", "swing_knee"),
+    ("swing_knee", "swing_ankle"), ("swing_heel", "swing_toe"), ("swing_ankle", "swing_heel"),
+    ("swing_ankle", "swing_toe"),
+)
+
+
+def _mpl():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def stick_strip(frames: Sequence[dict], path: Path, title: str, every: int = 5) -> None:
+    """Overlay stick figures every ``every`` control periods, like the paper's Fig. 6.
+
+    ``frames``: per period, a dict with ``keypoints`` (name -> (y, z) [m]) and ``t`` [s].
+    """
+    plt = _mpl()
+    fig, ax = plt.subplots(figsize=(10, 3.5))
+    sel = list(frames[::every]) + ([frames[-1]] if len(frames) % every != 1 else [])
+    cmap = plt.get_cmap("viridis")
+    for k, fr in enumerate(sel):
+        c = cmap(k / max(len(sel) - 1, 1))
+        for a, b in SEGMENTS:
+            pa, pb = fr["keypoints"][a], fr["keypoints"][b]
+            ax.plot([pa[0], pb[0]], [pa[1], pb[1]], color=c, lw=1.2)
+    ys = [p[0] for fr in sel for p in fr["keypoints"].values()]
+    ax.axhline(0.0, color="k", lw=1)
+    ax.set_xlim(min(ys) - 0.5, max(ys) + 0.5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("y [m]")
+    ax.set_ylabel("z [m]")
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def mode_timeline(t: Sequence[float], modes: Sequence[int], path: Path, title: str,
+                  switches: Sequence[tuple[float, int, int]] = ()) -> None:
+    """Model number against time, like the paper's Fig. 7 (switch times marked)."""
+    plt = _mpl()
+    fig, ax = plt.subplots(figsize=(8, 2.8))
+    ax.step(t, modes, where="post", color="tab:blue")
+    for ts, _, _ in switches:
+        ax.axvline(ts, color="tab:gray", lw=0.6, ls=":")
+    ax.set_yticks([1, 2, 3, 4])
+    ax.set_ylim(0.5, 4.5)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("model")
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
+    """Write RGB frames as an animated GIF."""
+    from PIL import Image
+
+    if not images:
+        return
+    frames = [Image.fromarray(im) for im in images]
+    frames[0].save(path, save_all=True, append_images=frames[1:],
+                   duration=max(int(1000 / fps), 20), loop=0)
