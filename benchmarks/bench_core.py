@@ -17,6 +17,7 @@ import time
 import numpy as np
 from numba import njit
 
+from biped_constraint_env import dynamics as dyn
 from biped_constraint_env.hybrid import nb_make_work, nb_solve_mode, nb_solve_mode_w
 from biped_constraint_env.kinematics import point_bias_acceleration, point_jacobian
 from biped_constraint_env.model import paper_biped
@@ -28,7 +29,6 @@ from biped_constraint_env.simulator import (
     nb_advance_batch,
     step,
 )
-from biped_constraint_env import dynamics as dyn
 
 
 def _timeit(fn, n: int, repeats: int = 5) -> float:
@@ -84,8 +84,12 @@ def main(argv=None) -> int:
         tau_eff = tau6 - D @ qd
         t_aba = _timeit(lambda: pin.aba(model, data, q, qd, tau_eff), args.n)
         J = point_jacobian(chain, q, 5, heel)[1:2].copy()
-        gamma = point_bias_acceleration(chain, q, qd, 5, heel)[1:2].copy()  # Pinocchio: J a + gamma = 0
-        t_kkt = _timeit(lambda: pin.forwardDynamics(model, data, q, qd, tau_eff, J, gamma, 0.0), args.n)
+        gamma = point_bias_acceleration(chain, q, qd, 5, heel)[
+            1:2
+        ].copy()  # Pinocchio: J a + gamma = 0
+        t_kkt = _timeit(
+            lambda: pin.forwardDynamics(model, data, q, qd, tau_eff, J, gamma, 0.0), args.n
+        )
         qdd_pin = pin.forwardDynamics(model, data, q, qd, tau_eff, J, gamma, 0.0).copy()
         M_pin = pin.crba(model, data, q)
         M_pin = np.triu(M_pin) + np.triu(M_pin, 1).T
@@ -95,8 +99,10 @@ def main(argv=None) -> int:
         b_err = np.abs(b_pin - b_ours).max() / np.abs(b_pin).max()
         pin_rows = {2: t_aba, 3: t_kkt}
         print(f"Pinocchio {pin.__version__}: M rel. diff {M_err:.1e}, bias rel. diff {b_err:.1e}")
-        print("  (model 3 with K = 0 to match Pinocchio's frictionless KKT: "
-              f"max |qdd diff| = {np.abs(qdd_pin - _frictionless(params, q, qd, tau6)).max():.1e})")
+        print(
+            "  (model 3 with K = 0 to match Pinocchio's frictionless KKT: "
+            f"max |qdd diff| = {np.abs(qdd_pin - _frictionless(params, q, qd, tau6)).max():.1e})"
+        )
     except ImportError:
         pin_rows = {}
         print("pinocchio not installed (pip install pin): Pinocchio columns skipped")
@@ -117,8 +123,10 @@ def main(argv=None) -> int:
     iopt, fopt, a, b = opts.packed
     print()
     state0 = SimState(0.0, 1, 0, q0, np.zeros(6))
-    for label, torque in (("no event", np.zeros(5)),
-                          ("Table 2 row 1, events", np.array([10.0, 120.0, 35.0, 80.0, 0.0]))):
+    for label, torque in (
+        ("no event", np.zeros(5)),
+        ("Table 2 row 1, events", np.array([10.0, 120.0, 35.0, 80.0, 0.0])),
+    ):
         table = np.tile(torque, (4, 1))
         qq, vv = q0.copy(), np.zeros(6)
         ist, fst = np.array([1, 0, 0, 0], np.int64), np.zeros(2)
@@ -150,13 +158,17 @@ def main(argv=None) -> int:
             IST[:] = (1, 0, 0, 0)
             FST[:] = 0.0
             STATUS[:] = 0
-            nb_advance_batch(chs, scs, Q, QD, IST, FST, TAU, 0.02, iopt, fopt, a, b, EV, FO, STATUS, NEV)
+            nb_advance_batch(
+                chs, scs, Q, QD, IST, FST, TAU, 0.02, iopt, fopt, a, b, EV, FO, STATUS, NEV
+            )
 
         batch()
         t_b = _timeit(batch, 20) / n_b
-        print(f"default 20 ms control step ({opts.integrator} x {opts.substeps}, {label}): "
-              f"simulator.step {t_api:.1f} us | compiled call {t_c:.1f} us | "
-              f"batched, per simulator {t_b:.1f} us")
+        print(
+            f"default 20 ms control step ({opts.integrator} x {opts.substeps}, {label}): "
+            f"simulator.step {t_api:.1f} us | compiled call {t_c:.1f} us | "
+            f"batched, per simulator {t_b:.1f} us"
+        )
     return 0
 
 

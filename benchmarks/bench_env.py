@@ -46,7 +46,9 @@ def vec_steps_per_s(env_id: str, num_envs: int, mode: str, n: int, seed: int = 0
     venv.reset(seed=seed)
     rng = np.random.default_rng(seed)
     high = venv.single_action_space.high
-    acts = (rng.uniform(-1, 1, (n, num_envs, high.size)) * high * ACTION_FRACTION).astype(np.float32)
+    acts = (rng.uniform(-1, 1, (n, num_envs, high.size)) * high * ACTION_FRACTION).astype(
+        np.float32
+    )
     for k in range(min(n, 50)):
         venv.step(acts[k])
     t0 = time.perf_counter()
@@ -64,14 +66,18 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     ours = per_step_us("ConstrainedBiped-v0", args.steps)
     walker = per_step_us("Walker2d-v5", args.steps)
-    print(f"env.step via gym.make:   ConstrainedBiped-v0 {ours:8.1f} us | Walker2d-v5 {walker:8.1f} us"
-          f" | ratio {ours / walker:.3f} (target <= 0.25)")
+    print(
+        f"env.step via gym.make: ConstrainedBiped-v0 {ours:8.1f} us | Walker2d-v5 {walker:8.1f} us"
+        f" | ratio {ours / walker:.3f} (target <= 0.25)"
+    )
     n_vec = max(args.steps // args.num_envs, 20)
     ours_b = vec_steps_per_s("ConstrainedBiped-v0", args.num_envs, "vector_entry_point", n_vec * 4)
     ours_s = vec_steps_per_s("ConstrainedBiped-v0", args.num_envs, "sync", n_vec)
     walker_s = vec_steps_per_s("Walker2d-v5", args.num_envs, "sync", n_vec)
-    print(f"vector env, {args.num_envs} envs:   ConstrainedBiped-v0 batched {ours_b:10.0f} steps/s | "
-          f"ConstrainedBiped-v0 sync {ours_s:8.0f} steps/s | Walker2d-v5 sync {walker_s:8.0f} steps/s")
+    print(
+        f"vector env, {args.num_envs} envs:   ConstrainedBiped-v0 batched {ours_b:10.0f} steps/s | "
+        f"ConstrainedBiped-v0 sync {ours_s:8.0f} steps/s | Walker2d-v5 sync {walker_s:8.0f} steps/s"
+    )
     print(f"ratio batched / Walker2d-v5 sync: {ours_b / walker_s:.1f} (target >= 20)")
     return 0
 

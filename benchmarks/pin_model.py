@@ -36,7 +36,8 @@ def build(chain: ChainModel):
         jid = model.addJoint(parent, pin.JointModelRX(), placement, f"joint{i}")
         inertia = np.diag([ch[i, COL_INERTIA], ch[i, COL_INERTIA], ch[i, COL_INERTIA]])
         model.appendBodyToJoint(
-            jid, pin.Inertia(ch[i, COL_MASS], np.array([0.0, ch[i, COL_COM], 0.0]), inertia),
+            jid,
+            pin.Inertia(ch[i, COL_MASS], np.array([0.0, ch[i, COL_COM], 0.0]), inertia),
             pin.SE3.Identity(),
         )
         parent = jid

@@ -203,8 +203,14 @@ def rnea_full(
     g = chain.packed_scalars[SC_GRAVITY] if gravity else 0.0
     ext = np.asarray(ext_force_n, dtype=np.float64)
     tau, f, n = nb_rnea_full(
-        chain.packed, _vec6("q", q), _vec6("qd", qd), _vec6("qdd", qdd), g,
-        int(ext_link), float(ext_offset_m), ext,
+        chain.packed,
+        _vec6("q", q),
+        _vec6("qd", qd),
+        _vec6("qdd", qdd),
+        g,
+        int(ext_link),
+        float(ext_offset_m),
+        ext,
     )
     return RneaResult(tau, f, n)
 

@@ -47,12 +47,30 @@ OBS_FORCE_LIMIT_N = 1e5
 """Bound of the contact-force observations [N] (the robot weighs 49 N)."""
 OBS_DIM = 24
 OBS_NAMES: tuple[str, ...] = (
-    "theta0", "q1", "q2", "q3", "q4", "q5",
-    "theta0_dot", "q1_dot", "q2_dot", "q3_dot", "q4_dot", "q5_dot",
-    "hip_y_rel_stance_toe", "hip_z", "hip_vy", "hip_vz",
+    "theta0",
+    "q1",
+    "q2",
+    "q3",
+    "q4",
+    "q5",
+    "theta0_dot",
+    "q1_dot",
+    "q2_dot",
+    "q3_dot",
+    "q4_dot",
+    "q5_dot",
+    "hip_y_rel_stance_toe",
+    "hip_z",
+    "hip_vy",
+    "hip_vz",
     "stance_side",
-    "mode_1", "mode_2", "mode_3", "mode_4",
-    "f_stance_toe", "f_stance_heel", "f_contact_normal",
+    "mode_1",
+    "mode_2",
+    "mode_3",
+    "mode_4",
+    "f_stance_toe",
+    "f_stance_heel",
+    "f_contact_normal",
 )
 """Observation entries, in order (see the env docstring's table)."""
 TERMINATION_NON_FINITE = "non_finite"
@@ -147,14 +165,18 @@ def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
     return validate_actions(a, limit, out_of_range)
 
 
-def sample_initial_q(rng: np.random.Generator, posture: np.ndarray, noise_scale: float) -> np.ndarray:
+def sample_initial_q(
+    rng: np.random.Generator, posture: np.ndarray, noise_scale: float
+) -> np.ndarray:
     """The nominal posture with uniform noise in [-scale, scale] on q1..q5 [rad]."""
     q = np.array(posture, dtype=np.float64)
     q[1:] += rng.uniform(-noise_scale, noise_scale, size=N_LINKS - 1)
     return q
 
 
-def start_sampled(params: BipedParams, options: SimOptions, sim: SimArrays, idx: np.ndarray) -> None:
+def start_sampled(
+    params: BipedParams, options: SimOptions, sim: SimArrays, idx: np.ndarray
+) -> None:
     """Put slots ``idx`` (q already sampled) at rest in model 1, leg A standing, toe at y = 0.
 
     Raises ValueError if a sampled posture puts a point below the ground.
@@ -164,11 +186,25 @@ def start_sampled(params: BipedParams, options: SimOptions, sim: SimArrays, idx:
     sim.fst[idx] = 0.0
     chs, scs = params.packed
     iopt, fopt, _, _ = options.packed
-    low = nb_start_batch(chs, scs, sim.q, sim.qd, sim.ist, sim.fst, sim.forces, sim.status,
-                         sim.n_events, np.asarray(idx, np.int64), iopt, fopt)
+    low = nb_start_batch(
+        chs,
+        scs,
+        sim.q,
+        sim.qd,
+        sim.ist,
+        sim.fst,
+        sim.forces,
+        sim.status,
+        sim.n_events,
+        np.asarray(idx, np.int64),
+        iopt,
+        fopt,
+    )
     if np.any(low < -POSITION_TOLERANCE_M):
-        raise ValueError(f"a sampled start posture is below the ground (lowest z {low.min():.3g} m); "
-                         "reduce reset_noise_scale or change the posture")
+        raise ValueError(
+            f"a sampled start posture is below the ground (lowest z {low.min():.3g} m); "
+            "reduce reset_noise_scale or change the posture"
+        )
 
 
 def state_from_options(options: dict[str, Any]) -> SimState:
@@ -182,7 +218,9 @@ def state_from_options(options: dict[str, Any]) -> SimState:
     if mode not in (1, 2, 3, 4):
         raise ValueError(f"mode must be one of 1, 2, 3, 4, got {mode!r}")
     return SimState(
-        t=0.0, mode=Mode(int(mode)), stance_side=int(options.get("stance_side", 0)),
+        t=0.0,
+        mode=Mode(int(mode)),
+        stance_side=int(options.get("stance_side", 0)),
         q=np.asarray(options["q"], dtype=np.float64),
         qd=np.asarray(options.get("qd", np.zeros(N_LINKS)), dtype=np.float64),
         root_y=float(options.get("root_y", 0.0)),
@@ -190,24 +228,35 @@ def state_from_options(options: dict[str, Any]) -> SimState:
 
 
 def check_start_state(params: BipedParams, state: SimState) -> None:
-    """ValueError unless ``state`` is inside its model: feet on or above the ground, contacts held."""
+    """ValueError unless ``state`` is inside its model (points above ground, contacts held)."""
     pts = keypoints(params, state)
     low = {k: v[1] for k, v in pts.items() if v[1] < -POSITION_TOLERANCE_M}
     if low:
         raise ValueError(f"reset state puts points below the ground (z [m]): {low}")
     mode = state.mode
     if mode in (Mode.FOOT_FLAT, Mode.DOUBLE_SUPPORT) and (state.q[0] != 0 or state.qd[0] != 0):
-        raise ValueError(f"model {int(mode)} holds the stance foot flat: theta0 and its rate must be 0")
+        raise ValueError(
+            f"model {int(mode)} holds the stance foot flat: theta0 and its rate must be 0"
+        )
     if mode in (Mode.TOE_PIVOT, Mode.TOE_HEEL) and state.q[0] > 0:
         raise ValueError("models 2-3 pivot on the stance toe: theta0 must be <= 0 (heel up)")
     for m, name in ((Mode.TOE_HEEL, "swing_heel"), (Mode.DOUBLE_SUPPORT, "swing_toe")):
         if mode == m and abs(pts[name][1]) > 1e-6:
-            raise ValueError(f"model {int(m)} holds the {name} at z = 0, got z = {pts[name][1]:.3g} m")
+            raise ValueError(
+                f"model {int(m)} holds the {name} at z = 0, got z = {pts[name][1]:.3g} m"
+            )
 
 
-def reward_terms(progress_m: np.ndarray, dt: float, steps: np.ndarray, tau: np.ndarray,
-                 limit: float, w_forward: float, w_step: float,
-                 w_ctrl: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reward_terms(
+    progress_m: np.ndarray,
+    dt: float,
+    steps: np.ndarray,
+    tau: np.ndarray,
+    limit: float,
+    w_forward: float,
+    w_step: float,
+    w_ctrl: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(forward, step, ctrl) reward terms of one control period for n envs (see Rewards).
 
     Args:
@@ -306,7 +355,8 @@ class ConstrainedBipedEnv(gym.Env):
     | params | BipedParams | paper_biped() | the robot | dynamics |
     | preset | str | "default" | "default" or "paper" (the paper's numerics) | dynamics |
     | dt | float | 0.02 | control period [s] | dynamics, reward |
-    | integrator, substeps, impact, locate_events, jdot, strict, heel_force_includes_foot_weight | | None | override one option of the preset (``SimOptions``) | dynamics |
+    | integrator, substeps, impact, locate_events, jdot, strict, | | None | override | dynamics |
+    | heel_force_includes_foot_weight | | | one option of the preset (``SimOptions``) | |
     | torque_limit_nm | float | 150 | action bound [N m] | action |
     | out_of_range | str | "clip" | "clip" or "raise" | action |
     | forward_reward_weight | float | 1.0 | per (m/s) of hip progress | reward |
@@ -354,20 +404,35 @@ class ConstrainedBipedEnv(gym.Env):
         """Create the environment (see the class docstring, Arguments)."""
         self.params = params if params is not None else paper_biped()
         self.dt = float(dt)
-        self.options = resolve_options(preset, dt, dict(
-            integrator=integrator, substeps=substeps, impact=impact, locate_events=locate_events,
-            jdot=jdot, strict=strict, heel_force_includes_foot_weight=heel_force_includes_foot_weight,
-        ))
+        self.options = resolve_options(
+            preset,
+            dt,
+            dict(
+                integrator=integrator,
+                substeps=substeps,
+                impact=impact,
+                locate_events=locate_events,
+                jdot=jdot,
+                strict=strict,
+                heel_force_includes_foot_weight=heel_force_includes_foot_weight,
+            ),
+        )
         if not (np.isfinite(torque_limit_nm) and torque_limit_nm > 0):
             raise ValueError(f"torque_limit_nm must be finite and > 0, got {torque_limit_nm!r}")
         if out_of_range not in ("clip", "raise"):
             raise ValueError(f"out_of_range must be 'clip' or 'raise', got {out_of_range!r}")
-        for name, v in (("forward_reward_weight", forward_reward_weight), ("step_bonus", step_bonus),
-                        ("ctrl_cost_weight", ctrl_cost_weight), ("reset_noise_scale", reset_noise_scale)):
+        for name, v in (
+            ("forward_reward_weight", forward_reward_weight),
+            ("step_bonus", step_bonus),
+            ("ctrl_cost_weight", ctrl_cost_weight),
+            ("reset_noise_scale", reset_noise_scale),
+        ):
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
         self.posture = np.asarray(posture, dtype=np.float64)
         if self.posture.shape != (N_LINKS,):
             raise ValueError(f"posture must have shape ({N_LINKS},), got {self.posture.shape}")
@@ -378,8 +443,9 @@ class ConstrainedBipedEnv(gym.Env):
         self.reset_noise_scale = float(reset_noise_scale)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
-        self.action_space = spaces.Box(-self.torque_limit_nm, self.torque_limit_nm,
-                                       (N_ACTUATED,), np.float32)
+        self.action_space = spaces.Box(
+            -self.torque_limit_nm, self.torque_limit_nm, (N_ACTUATED,), np.float32
+        )
         self.observation_space = observation_space()
         self._sim = SimArrays(1)
         self._obs = np.zeros((1, OBS_DIM))
@@ -410,8 +476,11 @@ class ConstrainedBipedEnv(gym.Env):
             self._sim.q[0] = sample_initial_q(self.np_random, self.posture, self.reset_noise_scale)
             start_sampled(self.params, self.options, self._sim, np.zeros(1, np.int64))
         self._observe()
-        info = self._info(events=(), terms={"reward_forward": 0.0, "reward_step": 0.0,
-                                            "reward_ctrl": 0.0}, reason=None)
+        info = self._info(
+            events=(),
+            terms={"reward_forward": 0.0, "reward_step": 0.0, "reward_ctrl": 0.0},
+            reason=None,
+        )
         if self.render_mode == "human":
             self.render()
         return self._obs[0].copy(), info
@@ -434,11 +503,18 @@ class ConstrainedBipedEnv(gym.Env):
         elif status == STATUS_NONFINITE:
             reason = TERMINATION_NON_FINITE
         r_fwd, r_step, r_ctrl = reward_terms(
-            self._hip[:, 0] - hip_y0, self.dt, self._sim.ist[:, 2] - steps0, tau[None, :],
-            self.torque_limit_nm, *self.weights,
+            self._hip[:, 0] - hip_y0,
+            self.dt,
+            self._sim.ist[:, 2] - steps0,
+            tau[None, :],
+            self.torque_limit_nm,
+            *self.weights,
         )
-        terms = {"reward_forward": float(r_fwd[0]), "reward_step": float(r_step[0]),
-                 "reward_ctrl": float(r_ctrl[0])}
+        terms = {
+            "reward_forward": float(r_fwd[0]),
+            "reward_step": float(r_step[0]),
+            "reward_ctrl": float(r_ctrl[0]),
+        }
         reward = float((r_fwd + r_step + r_ctrl)[0])
         info = self._info(events, terms, reason)
         if self.render_mode == "human":
@@ -448,8 +524,9 @@ class ConstrainedBipedEnv(gym.Env):
     def _observe(self) -> None:
         chs, scs = self.params.packed
         s = self._sim
-        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW,
-                   OBS_HIGH)
+        nb_observe(
+            chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW, OBS_HIGH
+        )
 
     def _info(self, events, terms, reason) -> dict[str, Any]:
         s = self._sim
@@ -459,8 +536,9 @@ class ConstrainedBipedEnv(gym.Env):
             "steps_completed": int(s.ist[0, 2]),
             "t": float(s.fst[0, 0]),
             "hip_y": float(self._hip[0, 0]),
-            "switches": tuple((e.t, e.mode_from, e.mode_to) for e in events
-                              if e.code == EventCode.MODE_SWITCH),
+            "switches": tuple(
+                (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
+            ),
             "events": tuple((e.t, e.code.name.lower(), e.terminal) for e in events),
             "termination_reason": reason,
             **terms,
@@ -476,8 +554,9 @@ class ConstrainedBipedEnv(gym.Env):
         if self._renderer is None:
             self._renderer = Renderer()
         st = self.state
-        frame = self._renderer.frame(self.keypoints(), int(st.mode), st.t, st.stance_side,
-                                     st.steps_completed)
+        frame = self._renderer.frame(
+            self.keypoints(), int(st.mode), st.t, st.stance_side, st.steps_completed
+        )
         if self.render_mode == "human":
             self._renderer.show(frame, 1.0 / self.metadata["render_fps"])
             return None

@@ -26,7 +26,17 @@ from numba import njit
 
 from .contact import nb_contact_rows
 from .dynamics import nb_crba, nb_mass_matrix, nb_rnea_backward
-from .kinematics import K_COS, K_OY, K_OZ, K_PHI, K_SIN, NK, nb_fk, nb_forward_pass, nb_point_jacobian
+from .kinematics import (
+    K_COS,
+    K_OY,
+    K_OZ,
+    K_PHI,
+    K_SIN,
+    NK,
+    nb_fk,
+    nb_forward_pass,
+    nb_point_jacobian,
+)
 from .model import (
     COL_ANGLE,
     COL_DAMPING,
@@ -188,9 +198,7 @@ def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W):
     if nc == 1:
         if jdot_fd_h > 0.0:
             nb_fk(ch, q - jdot_fd_h * qd, z6, z6, 0.0, W[W_KP])
-        gamma, sg = nb_contact_rows(
-            K, W[W_KP], qd, sc[col], slip_eps, jdot_fd_h, jac, W[W_JACP]
-        )
+        gamma, sg = nb_contact_rows(K, W[W_KP], qd, sc[col], slip_eps, jdot_fd_h, jac, W[W_JACP])
         fric = sc[SC_FRICTION] * sg
         for i in range(n):
             A[i, n] = -(jac[1, s0 + i] - fric * jac[0, s0 + i])

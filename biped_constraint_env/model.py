@@ -82,8 +82,8 @@ class LinkParams:
     @property
     def inertia_com_kgm2(self) -> float:
         """Solid cylinder about a transverse axis through the COM: m (3 r^2 + l^2) / 12 [kg m^2]."""
-        m, r, l = self.mass_kg, self.radius_m, self.length_m
-        return m * (3.0 * r**2 + l**2) / 12.0
+        m, r, length = self.mass_kg, self.radius_m, self.length_m
+        return m * (3.0 * r**2 + length**2) / 12.0
 
 
 _FOOT = LinkParams(mass_kg=0.5, length_m=0.5, radius_m=0.5, damping_nms_per_rad=10.0)

@@ -37,8 +37,9 @@ class Renderer:
             ) from e
         self._fig = None
 
-    def frame(self, pts: dict[str, np.ndarray], mode: int, t: float, stance_side: int,
-              steps: int) -> np.ndarray:
+    def frame(
+        self, pts: dict[str, np.ndarray], mode: int, t: float, stance_side: int, steps: int
+    ) -> np.ndarray:
         """RGB frame of the keypoints ``pts`` (world y, z [m]) with model number and time."""
         from PIL import Image, ImageDraw
 
@@ -58,7 +59,9 @@ class Renderer:
             chain = [f"{role}_toe", f"{role}_heel", f"{role}_ankle", f"{role}_toe"]
             colour = _LEG_COLOURS[leg]
             d.line([px(pts[n]) for n in chain], fill=colour, width=4)
-            d.line([px(pts[n]) for n in (f"{role}_ankle", f"{role}_knee", "hip")], fill=colour, width=5)
+            d.line(
+                [px(pts[n]) for n in (f"{role}_ankle", f"{role}_knee", "hip")], fill=colour, width=5
+            )
         for name in CONTACTS_BY_MODE[Mode(mode)]:
             x, y = px(pts[name])
             d.ellipse([x - 5, y - 5, x + 5, y + 5], fill=(210, 30, 30))

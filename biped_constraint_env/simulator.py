@@ -24,7 +24,6 @@ import numpy as np
 from numba import njit
 
 from .hybrid import (
-    CONTACT_COL,
     FO_POS_TOL,
     FO_SLIP_EPS,
     FO_TIME_TOL,
@@ -533,9 +532,7 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
                 t += hh
                 continue
             if iopt[IO_LOCATE] != 0:
-                th = nb_locate_w(
-                    ch, sc, mode, q, qd, tau6, hh, mask, iopt, fopt, a, b, W, S, reuse
-                )
+                th = nb_locate_w(ch, sc, mode, q, qd, tau6, hh, mask, iopt, fopt, a, b, W, S, reuse)
                 t += th * hh
                 for j in range(6):
                     q[j] = S[S_QH][j]
@@ -615,8 +612,22 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
 def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces):
     """:func:`nb_advance_w` with a fresh workspace (one simulator, one control period)."""
     return nb_advance_w(
-        chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces,
-        nb_make_work(), nb_make_scratch(),
+        chs,
+        scs,
+        q,
+        qd,
+        ist,
+        fst,
+        tau_table,
+        dt,
+        iopt,
+        fopt,
+        a,
+        b,
+        ev,
+        forces,
+        nb_make_work(),
+        nb_make_scratch(),
     )
 
 
@@ -630,16 +641,31 @@ def nb_advance_batch(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, F
             NEV[i] = 0
             continue
         st, ne = nb_advance_w(
-            chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i],
-            FORCES[i], W, S,
+            chs,
+            scs,
+            Q[i],
+            QD[i],
+            IST[i],
+            FST[i],
+            TAU[i],
+            dt,
+            iopt,
+            fopt,
+            a,
+            b,
+            EV[i],
+            FORCES[i],
+            W,
+            S,
         )
         STATUS[i] = st
         NEV[i] = ne
 
 
 @njit(cache=True, parallel=True)
-def nb_advance_batch_parallel(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES,
-                              STATUS, NEV, nt):
+def nb_advance_batch_parallel(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, nt
+):
     """:func:`nb_advance_batch` split into ``nt`` chunks, one per thread (same results)."""
     n = Q.shape[0]
     chunk = (n + nt - 1) // nt
@@ -651,8 +677,22 @@ def nb_advance_batch_parallel(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a,
                 NEV[i] = 0
                 continue
             st, ne = nb_advance_w(
-                chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i],
-                FORCES[i], W, S,
+                chs,
+                scs,
+                Q[i],
+                QD[i],
+                IST[i],
+                FST[i],
+                TAU[i],
+                dt,
+                iopt,
+                fopt,
+                a,
+                b,
+                EV[i],
+                FORCES[i],
+                W,
+                S,
             )
             STATUS[i] = st
             NEV[i] = ne
@@ -721,23 +761,37 @@ def step(
     fst = np.array([state.t, state.root_y])
     ev = np.zeros((MAX_EVENTS, 5))
     forces = np.zeros(N_FORCES)
-    status, nev = nb_advance(chs, scs, q, qd, ist, fst, table, float(dt), iopt, fopt, a, b, ev, forces)
+    status, nev = nb_advance(
+        chs, scs, q, qd, ist, fst, table, float(dt), iopt, fopt, a, b, ev, forces
+    )
     events = events_from_buffer(ev, nev)
-    new_state = SimState(
-        t=float(fst[FS_T]),
-        mode=Mode(int(ist[ST_MODE])),
-        stance_side=int(ist[ST_SIDE]),
-        q=q,
-        qd=qd,
-        root_y=float(fst[FS_ROOT]),
-        steps_completed=int(ist[ST_STEPS]),
-        recorded_violations=int(ist[ST_IGNORED]),
-    ) if status != STATUS_NONFINITE else None
+    new_state = (
+        SimState(
+            t=float(fst[FS_T]),
+            mode=Mode(int(ist[ST_MODE])),
+            stance_side=int(ist[ST_SIDE]),
+            q=q,
+            qd=qd,
+            root_y=float(fst[FS_ROOT]),
+            steps_completed=int(ist[ST_STEPS]),
+            recorded_violations=int(ist[ST_IGNORED]),
+        )
+        if status != STATUS_NONFINITE
+        else None
+    )
     if status == STATUS_NONFINITE:
         raise SimulationError(
-            f"non-finite state after t = {fst[FS_T]:.6f} s in model {int(ist[ST_MODE])}", 
-            SimState(float(fst[FS_T]), Mode(int(ist[ST_MODE])), int(ist[ST_SIDE]), q, qd,
-                     float(fst[FS_ROOT]), int(ist[ST_STEPS]), int(ist[ST_IGNORED])),
+            f"non-finite state after t = {fst[FS_T]:.6f} s in model {int(ist[ST_MODE])}",
+            SimState(
+                float(fst[FS_T]),
+                Mode(int(ist[ST_MODE])),
+                int(ist[ST_SIDE]),
+                q,
+                qd,
+                float(fst[FS_ROOT]),
+                int(ist[ST_STEPS]),
+                int(ist[ST_IGNORED]),
+            ),
             table,
         )
     termination = next((e.code for e in events if e.terminal), None)
@@ -762,8 +816,16 @@ def evaluate(params: BipedParams, state: SimState, tau, options: SimOptions = DE
     ch = params.chain(state.stance_side)
     iopt, fopt, _, _ = options.packed
     qdd, forces, guards, _ = nb_evaluate(
-        ch.packed, ch.packed_scalars, int(state.mode), state.q, state.qd, tau6, state.root_y,
-        iopt, fopt, 0.0,
+        ch.packed,
+        ch.packed_scalars,
+        int(state.mode),
+        state.q,
+        state.qd,
+        tau6,
+        state.root_y,
+        iopt,
+        fopt,
+        0.0,
     )
     return qdd, forces, guards
 
@@ -816,8 +878,17 @@ def integrate_mode(
     ch = params.chain(state.stance_side)
     iopt, fopt, a, b = options.packed
     q1, qd1 = nb_integrate(
-        ch.packed, ch.packed_scalars, int(state.mode), state.q.copy(), state.qd.copy(), tau6,
-        float(h), iopt, fopt, a, b,
+        ch.packed,
+        ch.packed_scalars,
+        int(state.mode),
+        state.q.copy(),
+        state.qd.copy(),
+        tau6,
+        float(h),
+        iopt,
+        fopt,
+        a,
+        b,
     )
     if not (np.all(np.isfinite(q1)) and np.all(np.isfinite(qd1))):
         raise SimulationError(f"non-finite state after one step of {h} s", state, table)
@@ -848,8 +919,12 @@ class SimArrays:
         """Store ``state`` in slot i (status reset to running)."""
         self.q[i] = state.q
         self.qd[i] = state.qd
-        self.ist[i] = (int(state.mode), state.stance_side, state.steps_completed,
-                       state.recorded_violations)
+        self.ist[i] = (
+            int(state.mode),
+            state.stance_side,
+            state.steps_completed,
+            state.recorded_violations,
+        )
         self.fst[i] = (state.t, state.root_y)
         self.status[i] = STATUS_OK
         self.n_events[i] = 0
@@ -858,9 +933,13 @@ class SimArrays:
     def get(self, i: int) -> SimState:
         """The state in slot i as a :class:`SimState`."""
         return SimState(
-            t=float(self.fst[i, FS_T]), mode=Mode(int(self.ist[i, ST_MODE])),
-            stance_side=int(self.ist[i, ST_SIDE]), q=self.q[i], qd=self.qd[i],
-            root_y=float(self.fst[i, FS_ROOT]), steps_completed=int(self.ist[i, ST_STEPS]),
+            t=float(self.fst[i, FS_T]),
+            mode=Mode(int(self.ist[i, ST_MODE])),
+            stance_side=int(self.ist[i, ST_SIDE]),
+            q=self.q[i],
+            qd=self.qd[i],
+            root_y=float(self.fst[i, FS_ROOT]),
+            steps_completed=int(self.ist[i, ST_STEPS]),
             recorded_violations=int(self.ist[i, ST_IGNORED]),
         )
 
@@ -885,15 +964,32 @@ def nb_start_batch(chs, scs, Q, QD, IST, FST, FORCES, STATUS, NEV, idx, iopt, fo
         side = IST[i, ST_SIDE]
         pts = nb_keypoints(chs[side], scs[side], Q[i], FST[i, FS_ROOT])
         low[k] = pts[:, 1].min()
-        nb_evaluate_w(chs[side], scs[side], IST[i, ST_MODE], Q[i], QD[i], tau6, iopt, fopt, 0.0,
-                      W, FORCES[i], g)
+        nb_evaluate_w(
+            chs[side],
+            scs[side],
+            IST[i, ST_MODE],
+            Q[i],
+            QD[i],
+            tau6,
+            iopt,
+            fopt,
+            0.0,
+            W,
+            FORCES[i],
+            g,
+        )
         STATUS[i] = STATUS_OK
         NEV[i] = 0
     return low
 
 
-def advance(params: BipedParams, arrays: SimArrays, tau_tables: np.ndarray, dt: float,
-            options: SimOptions = DEFAULT_OPTIONS) -> None:
+def advance(
+    params: BipedParams,
+    arrays: SimArrays,
+    tau_tables: np.ndarray,
+    dt: float,
+    options: SimOptions = DEFAULT_OPTIONS,
+) -> None:
     """Advance every running slot of ``arrays`` by dt [s] under ``tau_tables`` (n, 4, 5) [N m].
 
     Slots whose status is not 0 (terminated or non-finite) are left as they are. Inputs are
@@ -901,8 +997,24 @@ def advance(params: BipedParams, arrays: SimArrays, tau_tables: np.ndarray, dt: 
     """
     chs, scs = params.packed
     iopt, fopt, a, b = options.packed
-    args = (chs, scs, arrays.q, arrays.qd, arrays.ist, arrays.fst, tau_tables, float(dt),
-            iopt, fopt, a, b, arrays.events, arrays.forces, arrays.status, arrays.n_events)
+    args = (
+        chs,
+        scs,
+        arrays.q,
+        arrays.qd,
+        arrays.ist,
+        arrays.fst,
+        tau_tables,
+        float(dt),
+        iopt,
+        fopt,
+        a,
+        b,
+        arrays.events,
+        arrays.forces,
+        arrays.status,
+        arrays.n_events,
+    )
     if arrays.n >= PARALLEL_MIN_BATCH and numba.get_num_threads() > 1:
         nb_advance_batch_parallel(*args, numba.get_num_threads())
     else:

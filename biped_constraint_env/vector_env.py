@@ -13,7 +13,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -70,7 +69,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._tau = np.zeros((num_envs, 4, N_ACTUATED))
         self._elapsed = np.zeros(num_envs, np.int64)
         self._autoreset = np.zeros(num_envs, bool)
-        self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(num_envs)]
+        self._rngs: list[np.random.Generator] = [
+            seeding.np_random(None)[0] for _ in range(num_envs)
+        ]
 
     def _reset_slots(self, idx: np.ndarray) -> None:
         """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
@@ -84,7 +85,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-environment; ``seed`` s seeds sub-environment i with s + i."""
         if seed is not None:
-            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
+            seeds = (
+                [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
+            )
             if len(seeds) != self.num_envs:
                 raise ValueError(f"expected {self.num_envs} seeds, got {len(seeds)}")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
@@ -92,7 +95,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             state = state_from_options(options)
             check_start_state(self.params, state)
             for i in range(self.num_envs):
-                self._sim.set(i, state, evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1])
+                self._sim.set(
+                    i, state, evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
+                )
             self._elapsed[:] = 0
         else:
             self._reset_slots(np.arange(self.num_envs))
@@ -121,8 +126,12 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._sim.n_events[resetting] = 0
         self._observe()
         r_fwd, r_step, r_ctrl = reward_terms(
-            self._hip[:, 0] - hip0, self.dt, self._sim.ist[:, 2] - steps0, tau,
-            p.torque_limit_nm, *p.weights,
+            self._hip[:, 0] - hip0,
+            self.dt,
+            self._sim.ist[:, 2] - steps0,
+            tau,
+            p.torque_limit_nm,
+            *p.weights,
         )
         r_step = r_step.astype(np.float64)
         r_fwd[resetting] = r_step[resetting] = r_ctrl[resetting] = 0.0
@@ -141,8 +150,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def _observe(self) -> None:
         chs, scs = self.params.packed
         s = self._sim
-        nb_observe(chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW,
-                   OBS_HIGH)
+        nb_observe(
+            chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW, OBS_HIGH
+        )
 
     def _infos(self, zeros: np.ndarray, terms) -> dict[str, Any]:
         s = self._sim

@@ -8,8 +8,22 @@ import pytest
 
 import biped_constraint_env
 
-LAYERS = ["units", "planar", "integrators", "model", "kinematics", "dynamics", "contact",
-          "modes", "hybrid", "simulator", "render", "env", "vector_env", "__init__"]
+LAYERS = [
+    "units",
+    "planar",
+    "integrators",
+    "model",
+    "kinematics",
+    "dynamics",
+    "contact",
+    "modes",
+    "hybrid",
+    "simulator",
+    "render",
+    "env",
+    "vector_env",
+    "__init__",
+]
 PKG = Path(biped_constraint_env.__file__).parent
 
 

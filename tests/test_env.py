@@ -28,7 +28,10 @@ def _rollout(env, seed, n, scale=SMALL):
     return out
 
 
-ACTION_SCALE_ADVICE = ("symmetric and normalized space", "symmetric and normalized Box action space")
+ACTION_SCALE_ADVICE = (
+    "symmetric and normalized space",
+    "symmetric and normalized Box action space",
+)
 """The one expected checker message: the mission fixes the action in N m (STYLE.md); the
 training scripts rescale it to [-1, 1]. Any other warning fails the tests below."""
 
@@ -38,7 +41,9 @@ def test_gymnasium_check_env_no_other_warnings():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env.unwrapped, skip_render_check=True)
-    others = [str(w.message) for w in caught if not any(a in str(w.message) for a in ACTION_SCALE_ADVICE)]
+    others = [
+        str(w.message) for w in caught if not any(a in str(w.message) for a in ACTION_SCALE_ADVICE)
+    ]
     assert not others
 
 
@@ -49,8 +54,9 @@ def test_sb3_check_env():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         sb3_check(env, warn=True)
-    others = [str(w.message) for w in caught
-              if not any(a in str(w.message) for a in ACTION_SCALE_ADVICE)]
+    others = [
+        str(w.message) for w in caught if not any(a in str(w.message) for a in ACTION_SCALE_ADVICE)
+    ]
     assert not others
 
 
@@ -75,7 +81,9 @@ def test_obs_in_space_and_reward_equals_terms():
     env = gym.make(ENV_ID)
     for obs, r, info in _rollout(env, 3, 600):
         assert env.observation_space.contains(obs)
-        assert r == pytest.approx(info["reward_forward"] + info["reward_step"] + info["reward_ctrl"], abs=1e-12)
+        assert r == pytest.approx(
+            info["reward_forward"] + info["reward_step"] + info["reward_ctrl"], abs=1e-12
+        )
 
 
 def test_info_consistent_with_state():
@@ -92,8 +100,17 @@ def test_info_consistent_with_state():
     assert set(u.keypoints()) >= {"stance_toe", "swing_heel", "hip", "stance_knee", "swing_ankle"}
 
 
-@pytest.mark.parametrize("bad", [np.full(5, np.nan), np.full(5, np.inf), np.zeros(4), np.zeros((5, 1)),
-                                 np.array(["a"] * 5), [1, 2, 3]])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.full(5, np.nan),
+        np.full(5, np.inf),
+        np.zeros(4),
+        np.zeros((5, 1)),
+        np.array(["a"] * 5),
+        [1, 2, 3],
+    ],
+)
 def test_bad_actions_raise(bad):
     env = gym.make(ENV_ID).unwrapped
     env.reset(seed=0)
@@ -161,8 +178,14 @@ def test_truncation_by_time_limit():
 def test_paper_preset_options():
     env = ConstrainedBipedEnv(preset="paper")
     o = env.options
-    assert (o.integrator, o.impact, o.locate_events, o.jdot, o.strict,
-            o.heel_force_includes_foot_weight) == ("euler", "paper", False, "finite_difference", False, False)
+    assert (
+        o.integrator,
+        o.impact,
+        o.locate_events,
+        o.jdot,
+        o.strict,
+        o.heel_force_includes_foot_weight,
+    ) == ("euler", "paper", False, "finite_difference", False, False)
     assert ConstrainedBipedEnv(preset="paper", integrator="rk4").options.integrator == "rk4"
 
 

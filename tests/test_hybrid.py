@@ -32,7 +32,9 @@ def test_constrained_solve_satisfies_constraint_and_motion(params, rng, which):
     tau = _tau6(rng.normal(scale=30, size=5))
     s = MODE_TABLE[Mode(which)].contact.end
     off = ch.packed_scalars[int(s)]
-    qdd, fn, sg, _ = nb_solve_mode(ch.packed, ch.packed_scalars, which, state.q, qd, tau, 0.0, 0.0, 1e-3)
+    qdd, fn, sg, _ = nb_solve_mode(
+        ch.packed, ch.packed_scalars, which, state.q, qd, tau, 0.0, 0.0, 1e-3
+    )
     J = kin.point_jacobian(ch, state.q, 5, off)
     jdot = kin.point_bias_acceleration(ch, state.q, qd, 5, off)
     # constraint at acceleration level (paper eq. 5): J_z qdd + Jdot_z qd = 0
@@ -77,7 +79,9 @@ def test_renumbering_keeps_world_pose_and_angular_velocity(params, rng):
     before = kin.keypoints(ch0, s3.q, 0.0)
     after = kin.keypoints(ch1, qn, root)
     names = list(kin.KEYPOINT_NAMES)
-    swap = {n: n.replace("stance", "X").replace("swing", "stance").replace("X", "swing") for n in names}
+    swap = {
+        n: n.replace("stance", "X").replace("swing", "stance").replace("X", "swing") for n in names
+    }
     for i, n in enumerate(names):
         assert after[names.index(swap[n])] == pytest.approx(before[i], abs=1e-12), n
     w_before = np.cumsum(qd)

@@ -17,14 +17,17 @@ def test_upright_posture_keypoints(chain):
         assert pts[names.index(f"{foot}_toe")] == pytest.approx([0.0, 0.0], abs=1e-12)
         assert pts[names.index(f"{foot}_heel")] == pytest.approx([-0.5, 0.0], abs=1e-12)
     assert kin.link_angles(np.zeros(6)) == pytest.approx(
-        [0, np.pi / 2, np.pi / 2, 3 * np.pi / 2, 3 * np.pi / 2, 2 * np.pi])
+        [0, np.pi / 2, np.pi / 2, 3 * np.pi / 2, 3 * np.pi / 2, 2 * np.pi]
+    )
 
 
 @pytest.mark.parametrize("link,s", POINTS)
 def test_jacobian_times_qd_matches_finite_difference(chain, rng, link, s):
     q, qd = rng.normal(size=6), rng.normal(size=6)
-    fd = (kin.point_position(chain, q + FD_STEP * qd, link, s)
-          - kin.point_position(chain, q - FD_STEP * qd, link, s)) / (2 * FD_STEP)
+    fd = (
+        kin.point_position(chain, q + FD_STEP * qd, link, s)
+        - kin.point_position(chain, q - FD_STEP * qd, link, s)
+    ) / (2 * FD_STEP)
     assert kin.point_jacobian(chain, q, link, s) @ qd == pytest.approx(fd, abs=ATOL_FD)
     assert kin.point_velocity(chain, q, qd, link, s) == pytest.approx(fd, abs=ATOL_FD)
 
@@ -43,8 +46,10 @@ def test_exact_jdot_qd_matches_finite_difference(chain, rng, link, s):
 def test_paper_finite_difference_jdot_is_first_order(chain, rng):
     q, qd = rng.normal(size=6), rng.normal(size=6)
     exact = kin.point_bias_acceleration(chain, q, qd, 5, -0.25)
-    errs = [np.linalg.norm(kin.point_bias_acceleration_fd(chain, q, qd, 5, -0.25, h) - exact)
-            for h in (4e-3, 2e-3, 1e-3)]
+    errs = [
+        np.linalg.norm(kin.point_bias_acceleration_fd(chain, q, qd, 5, -0.25, h) - exact)
+        for h in (4e-3, 2e-3, 1e-3)
+    ]
     assert errs[0] > 1e-4  # visibly wrong at the paper's scale of steps
     ratios = [errs[0] / errs[1], errs[1] / errs[2]]
     assert ratios == pytest.approx([2.0, 2.0], rel=0.05)  # O(h)

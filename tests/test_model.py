@@ -15,8 +15,14 @@ def test_paper_values(params):
 
 
 @pytest.mark.parametrize(
-    "field,value", [("mass_kg", -1.0), ("length_m", 0.0), ("radius_m", np.nan),
-                    ("damping_nms_per_rad", -0.1), ("mass_kg", np.inf)]
+    "field,value",
+    [
+        ("mass_kg", -1.0),
+        ("length_m", 0.0),
+        ("radius_m", np.nan),
+        ("damping_nms_per_rad", -0.1),
+        ("mass_kg", np.inf),
+    ],
 )
 def test_link_validation_names_field(field, value):
     kw = dataclasses.asdict(PAPER_LINKS[1])
@@ -26,8 +32,13 @@ def test_link_validation_names_field(field, value):
 
 
 @pytest.mark.parametrize(
-    "field,value", [("gravity_mps2", 0.0), ("friction_ratio", -1.0), ("heel_toe_split_m", np.nan),
-                    ("friction_ratio", "a")]
+    "field,value",
+    [
+        ("gravity_mps2", 0.0),
+        ("friction_ratio", -1.0),
+        ("heel_toe_split_m", np.nan),
+        ("friction_ratio", "a"),
+    ],
 )
 def test_biped_validation_names_field(field, value):
     with pytest.raises(ValueError, match=field):
@@ -40,7 +51,9 @@ def test_links_must_be_six():
 
 
 def test_reversed_chain_keeps_each_physical_joint_damping():
-    links = tuple(dataclasses.replace(l, damping_nms_per_rad=float(i)) for i, l in enumerate(PAPER_LINKS))
+    links = tuple(
+        dataclasses.replace(lk, damping_nms_per_rad=float(i)) for i, lk in enumerate(PAPER_LINKS)
+    )
     p = paper_biped(links=links)
     assert p.chain(0).joint_damping_nms_per_rad == (0, 1, 2, 3, 4, 5)
     # joint j of the reversed chain is the paper's joint 6 - j; the toe pivot keeps D_0

@@ -61,7 +61,7 @@ def test_energy_balance_with_damping(params, mode):
 
 @pytest.mark.parametrize("mode", [1, 2])
 def test_energy_conserved_without_damping(mode):
-    links = tuple(dataclasses.replace(l, damping_nms_per_rad=0.0) for l in PAPER_LINKS)
+    links = tuple(dataclasses.replace(k, damping_nms_per_rad=0.0) for k in PAPER_LINKS)
     p = paper_biped(links=links)
     ch = p.chain(0)
     st = _start(mode)
@@ -72,8 +72,12 @@ def test_energy_conserved_without_damping(mode):
 
 @pytest.mark.parametrize(
     "integrator,ns,expected",
-    [("euler", (64, 128, 256), 2.0), ("semi_implicit", (64, 128, 256), 2.0),
-     ("rk2", (32, 64, 128), 4.0), ("rk4", (16, 32, 64), 16.0)],
+    [
+        ("euler", (64, 128, 256), 2.0),
+        ("semi_implicit", (64, 128, 256), 2.0),
+        ("rk2", (32, 64, 128), 4.0),
+        ("rk4", (16, 32, 64), 16.0),
+    ],
 )
 def test_convergence_order(params, integrator, ns, expected):
     """Model 1, Table 2 torques, 40 ms: the error ratio under halving the step."""
@@ -99,9 +103,16 @@ def _diverges(params, integrator, h, t_end=1.0):
 
 @pytest.mark.parametrize(
     "integrator,h,diverges",
-    [("euler", 0.020, True), ("euler", 0.010, True), ("euler", 0.005, False),
-     ("rk4", 0.020, True), ("rk4", 0.012, True), ("rk4", 0.008, False),
-     ("semi_implicit", 0.020, False), ("semi_implicit", 0.040, False)],
+    [
+        ("euler", 0.020, True),
+        ("euler", 0.010, True),
+        ("euler", 0.005, False),
+        ("rk4", 0.020, True),
+        ("rk4", 0.012, True),
+        ("rk4", 0.008, False),
+        ("semi_implicit", 0.020, False),
+        ("semi_implicit", 0.040, False),
+    ],
 )
 def test_stability_region_model1_table2(params, integrator, h, diverges):
     """Stiff mode lambda ~ 257 1/s: Euler needs h < 7.8 ms, RK4 h < 10.8 ms; semi-implicit any."""
@@ -225,7 +236,7 @@ def test_lenient_records_force_violation_and_goes_on(params):
 
 
 def test_non_finite_raises_with_last_finite_state():
-    links = tuple(dataclasses.replace(l, damping_nms_per_rad=1e300) for l in PAPER_LINKS)
+    links = tuple(dataclasses.replace(k, damping_nms_per_rad=1e300) for k in PAPER_LINKS)
     p = paper_biped(links=links)
     st = SimState(0.0, 1, 0, STANCE_POSTURE, np.full(6, 1.0) * [0, 1, 1, 1, 1, 1])
     opts = SimOptions(integrator="euler", substeps=4, strict=False)
@@ -255,7 +266,9 @@ def test_located_switch_time_is_precise(params):
     assert after.state.mode == Mode.TOE_HEEL
 
 
-@pytest.mark.parametrize("bad", [np.full(5, np.nan), np.zeros(4), np.full(5, np.inf), np.zeros((3, 5))])
+@pytest.mark.parametrize(
+    "bad", [np.full(5, np.nan), np.zeros(4), np.full(5, np.inf), np.zeros((3, 5))]
+)
 def test_bad_torque_raises(params, bad):
     with pytest.raises(ValueError, match="tau"):
         step(params, SimState(0.0, 1, 0, STANCE_POSTURE, np.zeros(6)), bad, DT)

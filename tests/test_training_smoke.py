@@ -13,8 +13,15 @@ def test_open_loop_writes_run_directory(tmp_path):
     rc = open_loop.main(["--out-dir", str(tmp_path), "--max-periods", "20", "--progress", "false"])
     assert rc == 0
     (run,) = (tmp_path / "open_loop").iterdir()
-    for name in ("config.toml", "command.txt", "versions.json", "summary.json",
-                 "figures/strip.png", "figures/modes.png", "figures/walk.gif"):
+    for name in (
+        "config.toml",
+        "command.txt",
+        "versions.json",
+        "summary.json",
+        "figures/strip.png",
+        "figures/modes.png",
+        "figures/walk.gif",
+    ):
         assert (run / name).is_file(), name
     summary = json.loads((run / "summary.json").read_text())
     assert summary["steps_completed"] >= 0 and summary["end_reason"] is not None
@@ -23,8 +30,9 @@ def test_open_loop_writes_run_directory(tmp_path):
 def test_open_loop_config_file_and_flags(tmp_path):
     cfg_file = tmp_path / "c.toml"
     cfg_file.write_text('preset = "default"\ndt = 0.002\nsigns = [1, -1, 1, -1, 1]\n')
-    cfg = open_loop.parse_config(open_loop.OpenLoopConfig,
-                                 ["--config", str(cfg_file), "--dt", "0.004"], "x")
+    cfg = open_loop.parse_config(
+        open_loop.OpenLoopConfig, ["--config", str(cfg_file), "--dt", "0.004"], "x"
+    )
     assert cfg.preset == "default" and cfg.dt == 0.004 and cfg.signs == (1, -1, 1, -1, 1)
 
 

@@ -13,14 +13,14 @@ def _run(mode, n_envs, steps, seed=3):
     ve = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode=mode)
     obs, _ = ve.reset(seed=seed)
     rng = np.random.default_rng(0)
-    O, R, T = [obs], [], []
+    obs_seq, R, T = [obs], [], []
     for _ in range(steps):
         obs, r, te, tr, info = ve.step(rng.uniform(-8, 8, (n_envs, 5)).astype(np.float32))
-        O.append(obs)
+        obs_seq.append(obs)
         R.append(r)
         T.append(te | tr)
     ve.close()
-    return np.array(O), np.array(R), np.array(T)
+    return np.array(obs_seq), np.array(R), np.array(T)
 
 
 @pytest.mark.parametrize("n_envs", [3, 9])  # below and above the parallel-kernel threshold
@@ -38,7 +38,9 @@ def test_async_matches_sync():
 
 
 def test_batched_truncation_and_infos():
-    ve = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=2)
+    ve = gym.make_vec(
+        ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=2
+    )
     ve.reset(seed=0)
     _, _, te, tr, _ = ve.step(np.zeros((2, 5), np.float32))
     assert not tr.any()

@@ -85,7 +85,14 @@ def to_toml(cfg: Any) -> str:
 def versions() -> dict[str, str]:
     """Package versions and the git commit, for the run directory."""
     out = {"python": platform.python_version()}
-    for name in ("numpy", "numba", "gymnasium", "stable_baselines3", "torch", "biped_constraint_env"):
+    for name in (
+        "numpy",
+        "numba",
+        "gymnasium",
+        "stable_baselines3",
+        "torch",
+        "biped_constraint_env",
+    ):
         try:
             mod = __import__(name)
             out[name] = getattr(mod, "__version__", "?")
@@ -93,7 +100,10 @@ def versions() -> dict[str, str]:
             out[name] = "not installed"
     try:
         out["git_commit"] = subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True,
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
             cwd=Path(__file__).resolve().parent,
         ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
@@ -101,8 +111,9 @@ def versions() -> dict[str, str]:
     return out
 
 
-def make_run_dir(out_dir: Path, script: str, env_id: str, seed: int, cfg: Any,
-                 argv: Sequence[str] | None) -> Path:
+def make_run_dir(
+    out_dir: Path, script: str, env_id: str, seed: int, cfg: Any, argv: Sequence[str] | None
+) -> Path:
     """Create a fresh run directory and write config.toml, command.txt and versions.json."""
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     run = Path(out_dir) / script / f"{env_id}__seed{seed}__{stamp}"

@@ -64,9 +64,14 @@ def run(cfg: OpenLoopConfig, record_frames: bool = True) -> dict:
     if signs.shape != (5,) or not np.all(np.abs(signs) == 1):
         raise ValueError(f"signs must be five values of +1 or -1, got {cfg.signs!r}")
     table = TABLES[cfg.table] * signs
-    env = gym.make(cfg.env_id, preset=cfg.preset, dt=cfg.dt, reset_noise_scale=0.0,
-                   render_mode="rgb_array" if (record_frames and cfg.gif) else None,
-                   max_episode_steps=cfg.max_periods)
+    env = gym.make(
+        cfg.env_id,
+        preset=cfg.preset,
+        dt=cfg.dt,
+        reset_noise_scale=0.0,
+        render_mode="rgb_array" if (record_frames and cfg.gif) else None,
+        max_episode_steps=cfg.max_periods,
+    )
     obs, info = env.reset(seed=cfg.seed, options={"q": np.asarray(cfg.posture), "mode": 1})
     u = env.unwrapped
     y0 = info["hip_y"]
@@ -87,8 +92,11 @@ def run(cfg: OpenLoopConfig, record_frames: bool = True) -> dict:
         frames.append({"t": info["t"], "mode": info["mode"], "keypoints": u.keypoints()})
     env.close()
     return {
-        "preset": cfg.preset, "table": cfg.table, "signs": list(cfg.signs),
-        "posture": list(cfg.posture), "dt": cfg.dt,
+        "preset": cfg.preset,
+        "table": cfg.table,
+        "signs": list(cfg.signs),
+        "posture": list(cfg.posture),
+        "dt": cfg.dt,
         "steps_completed": int(info["steps_completed"]),
         "distance_m": float(info["hip_y"] - y0),
         "t_end_s": float(info["t"]),
@@ -109,20 +117,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     from training import plots
 
     title = f"{cfg.table}, preset {cfg.preset}, signs {tuple(cfg.signs)}"
-    plots.stick_strip(out["frames"], rd / "figures" / "strip.png",
-                      f"{title}: {out['steps_completed']} steps", every=max(len(out["frames"]) // 12, 1))
-    plots.mode_timeline([f["t"] for f in out["frames"]], [f["mode"] for f in out["frames"]],
-                        rd / "figures" / "modes.png", title, out["switches"])
+    plots.stick_strip(
+        out["frames"],
+        rd / "figures" / "strip.png",
+        f"{title}: {out['steps_completed']} steps",
+        every=max(len(out["frames"]) // 12, 1),
+    )
+    plots.mode_timeline(
+        [f["t"] for f in out["frames"]],
+        [f["mode"] for f in out["frames"]],
+        rd / "figures" / "modes.png",
+        title,
+        out["switches"],
+    )
     if cfg.gif:
         plots.save_gif(out["images"], rd / "figures" / "walk.gif", fps=1.0 / cfg.dt)
     summary = {k: v for k, v in out.items() if k not in ("frames", "images")}
     (rd / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print(f"steps completed: {out['steps_completed']}   distance (hip): {out['distance_m']:.3f} m   "
-          f"simulated: {out['t_end_s']:.3f} s")
+    print(
+        f"steps completed: {out['steps_completed']}   distance (hip): {out['distance_m']:.3f} m   "
+        f"simulated: {out['t_end_s']:.3f} s"
+    )
     for t, a, b in out["switches"]:
         print(f"  t = {t:8.4f} s   model {a} -> {b}")
     for t, name, terminal in out["recorded_events"]:
-        print(f"  t = {t:8.4f} s   {name}{' (ended the run)' if terminal else ' (recorded, lenient)'}")
+        print(
+            f"  t = {t:8.4f} s   {name}{' (ended the run)' if terminal else ' (recorded, lenient)'}"
+        )
     print(f"ended by: {out['end_reason']}")
     print(f"run directory: {rd}")
     return 0

@@ -8,9 +8,15 @@ from pathlib import Path
 import numpy as np
 
 SEGMENTS = (
-    ("stance_toe", "stance_heel"), ("stance_heel", "stance_ankle"), ("stance_ankle", "stance_toe"),
-    ("stance_ankle", "stance_knee"), ("stance_knee", "hip"), ("hip", "swing_knee"),
-    ("swing_knee", "swing_ankle"), ("swing_heel", "swing_toe"), ("swing_ankle", "swing_heel"),
+    ("stance_toe", "stance_heel"),
+    ("stance_heel", "stance_ankle"),
+    ("stance_ankle", "stance_toe"),
+    ("stance_ankle", "stance_knee"),
+    ("stance_knee", "hip"),
+    ("hip", "swing_knee"),
+    ("swing_knee", "swing_ankle"),
+    ("swing_heel", "swing_toe"),
+    ("swing_ankle", "swing_heel"),
     ("swing_ankle", "swing_toe"),
 )
 
@@ -50,8 +56,13 @@ def stick_strip(frames: Sequence[dict], path: Path, title: str, every: int = 5) 
     plt.close(fig)
 
 
-def mode_timeline(t: Sequence[float], modes: Sequence[int], path: Path, title: str,
-                  switches: Sequence[tuple[float, int, int]] = ()) -> None:
+def mode_timeline(
+    t: Sequence[float],
+    modes: Sequence[int],
+    path: Path,
+    title: str,
+    switches: Sequence[tuple[float, int, int]] = (),
+) -> None:
     """Model number against time, like the paper's Fig. 7 (switch times marked)."""
     plt = _mpl()
     fig, ax = plt.subplots(figsize=(8, 2.8))
@@ -75,5 +86,6 @@ def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
     if not images:
         return
     frames = [Image.fromarray(im) for im in images]
-    frames[0].save(path, save_all=True, append_images=frames[1:],
-                   duration=max(int(1000 / fps), 20), loop=0)
+    frames[0].save(
+        path, save_all=True, append_images=frames[1:], duration=max(int(1000 / fps), 20), loop=0
+    )
