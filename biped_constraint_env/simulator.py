@@ -593,12 +593,11 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
                 break
             ignored |= 1 << k
             check = True
-    ch = chs[side]
-    sc = scs[side]
-    for j in range(5):
-        tau6[j + 1] = tau_table[mode - 1, j]
+    # the last evaluation (at an accepted step's end, at an event, or the check after a reset)
+    # was made at the final state with the final model's torques: its forces are the output
     if status != 2:
-        nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, 0.0, W, forces, g)
+        for j in range(N_FORCES):
+            forces[j] = fo[j]
     ist[ST_MODE] = mode
     ist[ST_SIDE] = side
     ist[ST_STEPS] = steps

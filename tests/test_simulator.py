@@ -305,3 +305,21 @@ def test_switches_follow_the_mode_table(params):
     assert (3, 4) in seen
     for a, b in seen:
         assert b == a % 4 + 1
+
+
+def test_table2_run_with_located_events_follows_mode_order(params):
+    """Table 2 (paper signs), nominal posture, located events, lenient: the switches it makes
+    follow 1 -> 2 -> 3 -> 4 -> 1. (No reading found so far completes a cycle: README.)"""
+    st = SimState(0.0, 1, 0, STANCE_POSTURE, np.zeros(6))
+    opts = DEFAULT_OPTIONS.replace(strict=False)
+    switches = []
+    for _ in range(100):
+        res = step(params, st, TABLE2_NM, DT, opts)
+        switches += [e for e in res.events if e.code == EventCode.MODE_SWITCH]
+        st = res.state
+        if res.terminated:
+            break
+    assert switches and switches[0].mode_from == 1 and switches[0].mode_to == 2
+    for e in switches:
+        assert e.mode_to == e.mode_from % 4 + 1
+    assert all(b.t >= a.t for a, b in zip(switches, switches[1:], strict=False))
