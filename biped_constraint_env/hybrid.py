@@ -56,8 +56,8 @@ CONTACT_COL = tuple(int(x) for x in _CT)
 
 # Integer options (iopt) and float options (fopt) of the compiled core.
 IO_INTEGRATOR, IO_SUBSTEPS, IO_IMPACT, IO_LOCATE, IO_JDOT_FD, IO_STRICT, IO_FOOT_WEIGHT = range(7)
-IO_PROJECT, IO_MAX_SWITCHES = 7, 8
-N_IOPT = 9
+IO_PROJECT, IO_MAX_SWITCHES, IO_MASS_RNEA = 7, 8, 9
+N_IOPT = 10
 FO_SLIP_EPS, FO_POS_TOL, FO_TIME_TOL = range(3)
 N_FOPT = 3
 IMPACT_PAPER, IMPACT_PLASTIC = 0, 1
@@ -67,7 +67,7 @@ FC_TOE, FC_HEEL, FC_CONTACT, FC_STANCE_Y, FC_SLIP = range(5)
 N_FORCES = 5
 
 # Workspace layout (a tuple of arrays).
-W_K, W_KP, W_M, W_TMP, W_F, W_N, W_A, W_R, W_JAC, W_JACP, W_QDD, W_Z6 = range(12)
+W_K, W_KP, W_M, W_TMP, W_F, W_N, W_A, W_R, W_JAC, W_JACP, W_QDD, W_Z6, W_CNT, W_E = range(14)
 
 INF = math.inf
 
@@ -98,6 +98,8 @@ def nb_make_work():
         np.empty((2, 6)),  # point Jacobian at the previous sample
         np.empty(6),  # qdd
         np.zeros(6),  # zeros (never written)
+        np.zeros(1),  # count of constrained solves (cost accounting)
+        np.zeros(6),  # unit vector scratch (mass matrix by Newton-Euler columns)
     )
 
 
@@ -160,7 +162,25 @@ def nb_lu_solve(a, b):
 
 
 @njit(cache=True)
-def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W):
+def nb_mass_matrix_columns_w(ch, q, W):
+    """M into W[W_M] column by column, INV(q, 0, e_i, 0) (paper eq. 14), leaving W[W_K] dirty."""
+    K = W[W_K]
+    e = W[W_E]
+    z6 = W[W_Z6]
+    M = W[W_M]
+    col = W[W_N]
+    for i in range(6):
+        for j in range(6):
+            e[j] = 0.0
+        e[i] = 1.0
+        nb_fk(ch, q, z6, e, 0.0, K)
+        nb_rnea_backward(ch, K, 0.0, -1, 0.0, 0.0, 0.0, W[W_F], col)
+        for j in range(6):
+            M[j, i] = col[j]
+
+
+@njit(cache=True)
+def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, mass_rnea=False):
     """The constrained solve of paper eq. 9 for ``mode`` (1..4); qdd goes to W[W_QDD].
 
     Args:
@@ -184,8 +204,13 @@ def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W):
     n = 6 - s0
     col = CONTACT_COL[mode]
     nc = 1 if col >= 0 else 0
-    nb_fk(ch, q, qd, z6, 0.0, K)
-    nb_crba(ch, K, M, W[W_TMP])
+    W[W_CNT][0] += 1.0
+    if mass_rnea:
+        nb_mass_matrix_columns_w(ch, q, W)
+        nb_fk(ch, q, qd, z6, 0.0, K)
+    else:
+        nb_fk(ch, q, qd, z6, 0.0, K)
+        nb_crba(ch, K, M, W[W_TMP])
     b = W[W_N]
     nb_rnea_backward(ch, K, sc[SC_GRAVITY], -1, 0.0, 0.0, 0.0, W[W_F], b)
     for i in range(n):
@@ -241,7 +266,9 @@ def nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd_h, W, forces, g):
     slip speed [m/s]. ``g`` (9,): index 0 the transition guard, k >= 1 the out-of-model guard
     of EventCode k (+inf where not applicable). qdd is left in W[W_QDD]. Returns the pivot ratio.
     """
-    fn, sg, piv = nb_solve_mode_w(ch, sc, mode, q, qd, tau6, 0.0, fd_h, fopt[FO_SLIP_EPS], W)
+    fn, sg, piv = nb_solve_mode_w(
+        ch, sc, mode, q, qd, tau6, 0.0, fd_h, fopt[FO_SLIP_EPS], W, iopt[IO_MASS_RNEA] != 0
+    )
     col = CONTACT_COL[mode]
     K = W[W_K]
     f = W[W_F]

@@ -34,6 +34,7 @@ from .hybrid import (
     IO_INTEGRATOR,
     IO_JDOT_FD,
     IO_LOCATE,
+    IO_MASS_RNEA,
     IO_MAX_SWITCHES,
     IO_PROJECT,
     IO_STRICT,
@@ -101,6 +102,8 @@ class SimOptions:
         pos_tol_m: penetration tolerated before a geometric event fires [m].
         time_tol_s: event-time tolerance of the root-finding [s].
         max_switches: model switches allowed in one control period before ZENO is declared.
+        mass_matrix: ``"crba"`` (composite bodies, one pass) or ``"newton_euler_columns"``
+            (the paper's route, eq. 14: six Newton-Euler passes with unit accelerations).
     """
 
     integrator: str = "rk2"
@@ -115,6 +118,7 @@ class SimOptions:
     pos_tol_m: float = 1e-9
     time_tol_s: float = 1e-7
     max_switches: int = 8
+    mass_matrix: str = "crba"
 
     def __post_init__(self) -> None:
         """Validate every option."""
@@ -131,6 +135,10 @@ class SimOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+        if self.mass_matrix not in ("crba", "newton_euler_columns"):
+            raise ValueError(
+                f"mass_matrix must be 'crba' or 'newton_euler_columns', got {self.mass_matrix!r}"
+            )
         if not isinstance(self.max_switches, (int, np.integer)) or self.max_switches < 1:
             raise ValueError(f"max_switches must be an int >= 1, got {self.max_switches!r}")
 
@@ -148,6 +156,7 @@ class SimOptions:
         iopt[IO_FOOT_WEIGHT] = self.heel_force_includes_foot_weight
         iopt[IO_PROJECT] = self.project_constraints
         iopt[IO_MAX_SWITCHES] = self.max_switches
+        iopt[IO_MASS_RNEA] = self.mass_matrix == "newton_euler_columns"
         fopt = np.zeros(N_FOPT)
         fopt[FO_SLIP_EPS] = self.slip_eps_mps
         fopt[FO_POS_TOL] = self.pos_tol_m
@@ -306,7 +315,7 @@ def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=
     qd1 = S[S_QD1]
     qdd = W[W_QDD]
     if method == SEMI_IMPLICIT:
-        nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h, fd, eps, W)
+        nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h, fd, eps, W, iopt[IO_MASS_RNEA] != 0)
         for j in range(6):
             qd1[j] = qd[j] + h * qdd[j]
             q1[j] = q[j] + h * qd1[j]
@@ -331,7 +340,7 @@ def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=
                     kq[0, j] = qd[j]
                     kv[0, j] = S[S_K1][j]
                 continue
-            nb_solve_mode_w(ch, sc, mode, qs, vs, tau6, 0.0, fd, eps, W)
+            nb_solve_mode_w(ch, sc, mode, qs, vs, tau6, 0.0, fd, eps, W, iopt[IO_MASS_RNEA] != 0)
             for j in range(6):
                 kq[st, j] = vs[j]
                 kv[st, j] = qdd[j]
