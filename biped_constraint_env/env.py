@@ -9,6 +9,7 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
+from .hybrid import nb_wrap
 from .kinematics import NK, nb_hip_kinematics
 from .model import N_ACTUATED, N_LINKS, BipedParams, paper_biped
 from .modes import EventCode, Mode
@@ -108,7 +109,7 @@ def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
         HIP[i, 2] = hvy
         HIP[i, 3] = hvz
         for j in range(6):
-            OBS[i, j] = Q[i, j]
+            OBS[i, j] = nb_wrap(Q[i, j])  # angles, so wrapped to (-pi, pi]
             OBS[i, 6 + j] = QD[i, j]
         OBS[i, 12] = hy - FST[i, 1]
         OBS[i, 13] = hz
@@ -306,7 +307,7 @@ class ConstrainedBipedEnv(gym.Env):
 
     | Num | quantity | min | max | unit |
     |-----|----------|-----|-----|------|
-    | 0-5 | theta0, q1..q5 (MODEL.md coordinates, current numbering) | -pi | pi | rad |
+    | 0-5 | theta0, q1..q5 (MODEL.md coordinates, current numbering), wrapped | -pi | pi | rad |
     | 6-11 | their rates | -1e3 | 1e3 | rad/s |
     | 12 | hip y relative to the stance toe | -10 | 10 | m |
     | 13 | hip height z | -10 | 10 | m |

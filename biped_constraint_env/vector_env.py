@@ -41,18 +41,27 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     Args:
         num_envs: number of sub-environments.
         max_episode_steps: truncation after this many control periods (registration: 1000).
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (Gymnasium's default) or ``SAME_STEP``
+            (a finished sub-environment is reset within the same step; its last observation
+            is in ``info["final_obs"]`` and its last info in ``info["final_info"]``, as
+            Stable-Baselines3's VecEnv expects).
         **kwargs: the single environment's keyword arguments (``render_mode`` excepted).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000, **kwargs: Any):
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any):
         """Create the batch; the single env validates the arguments."""
         if kwargs.get("render_mode") is not None:
             raise ValueError("the batched vector env does not render; use gym.make for that")
         kwargs.pop("render_mode", None)
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an int >= 1, got {num_envs!r}")
+        autoreset_mode = AutoresetMode(autoreset_mode)
+        if autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {autoreset_mode}")
+        self.metadata = {**self.metadata, "autoreset_mode": autoreset_mode}
         self._proto = ConstrainedBipedEnv(**kwargs)  # validation and settings, never stepped
         self.num_envs = num_envs
         self.max_episode_steps = max_episode_steps
@@ -143,8 +152,22 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         truncated = np.zeros(self.num_envs, bool)
         if self.max_episode_steps is not None:
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
-        self._autoreset = terminated | truncated
         infos = self._infos(np.zeros(self.num_envs), (r_fwd, r_step, r_ctrl))
+        done = np.flatnonzero(terminated | truncated)
+        if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            final_info = np.full(self.num_envs, None, dtype=object)
+            for i in done:
+                final_obs[i] = self._obs[i].copy()
+                final_info[i] = {k: v[i] for k, v in infos.items() if not k.startswith("_")}
+            self._reset_slots(done)
+            self._observe()
+            mask = np.zeros(self.num_envs, bool)
+            mask[done] = True
+            infos.update(final_obs=final_obs, _final_obs=mask, final_info=final_info,
+                         _final_info=mask)
+        else:
+            self._autoreset = terminated | truncated
         return self._obs.copy(), rewards, terminated, truncated, infos
 
     def _observe(self) -> None:

@@ -56,3 +56,29 @@ def test_batched_bad_actions():
         ve.step(np.zeros((3, 5)))
     with pytest.raises(ValueError, match="finite"):
         ve.step(np.full((2, 5), np.nan))
+
+
+def test_same_step_autoreset_matches_next_step():
+    """SAME_STEP returns the reset observation at once and the final one in info."""
+    from gymnasium.vector import AutoresetMode
+
+    kw = dict(num_envs=3, vectorization_mode="vector_entry_point")
+    nxt = gym.make_vec(ENV_ID, **kw)
+    same = gym.make_vec(ENV_ID, autoreset_mode=AutoresetMode.SAME_STEP, **kw)
+    nxt.reset(seed=1)
+    same.reset(seed=1)
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        a = rng.uniform(-8, 8, (3, 5)).astype(np.float32)
+        o1, r1, t1, u1, _ = nxt.step(a)
+        o2, r2, t2, u2, i2 = same.step(a)
+        assert np.array_equal(r1, r2) and np.array_equal(t1, t2) and np.array_equal(u1, u2)
+        done = t1 | u1
+        if done.any():
+            break
+        assert np.array_equal(o1, o2)
+    assert done.any()
+    for i in np.flatnonzero(done):
+        assert np.array_equal(i2["final_obs"][i], o1[i])
+    o1_reset, r_reset, *_ = nxt.step(a)  # NEXT_STEP resets the finished ones now
+    assert np.array_equal(o1_reset[done], o2[done]) and np.all(r_reset[done] == 0.0)

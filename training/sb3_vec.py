@@ -1,0 +1,122 @@
+"""Stable-Baselines3 vectorised environments for ConstrainedBiped-v0.
+
+:func:`make_sb3_vec_env` builds the batched vector env behind :class:`BatchedSB3VecEnv` (one
+compiled call steps every simulator), or SB3's own SubprocVecEnv / DummyVecEnv of single envs.
+Actions are in [-1, 1] for the policy and rescaled to N m.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv as _SB3VecEnv
+
+
+def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: str = "batched"):
+    """An SB3 VecEnv of ConstrainedBiped-v0 with actions in [-1, 1] (rescaled to N m).
+
+    ``vec="batched"``: the batched vector env (all simulators in one compiled call) behind
+    :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
+    ``"dummy"``: DummyVecEnv (one process).
+    """
+    import gymnasium as gym
+    from gymnasium.wrappers import RescaleAction
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    import biped_constraint_env  # noqa: F401
+
+    if vec == "batched":
+        from gymnasium.vector import AutoresetMode
+
+        venv = gym.make_vec("ConstrainedBiped-v0", num_envs=n_envs,
+                            vectorization_mode="vector_entry_point",
+                            autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs)
+        out = BatchedSB3VecEnv(venv)
+        out.seed(seed)
+        return out
+
+    def make(i):
+        def thunk():
+            lo, hi = np.full(5, -1.0, np.float32), np.full(5, 1.0, np.float32)
+            env = RescaleAction(gym.make("ConstrainedBiped-v0", **env_kwargs), lo, hi)
+            env.reset(seed=seed + i)
+            return env
+        return thunk
+
+    cls = SubprocVecEnv if vec == "subproc" else DummyVecEnv
+    if vec not in ("subproc", "dummy"):
+        raise ValueError(f"vec must be 'batched', 'subproc' or 'dummy', got {vec!r}")
+    out = cls([make(i) for i in range(n_envs)])
+    out.seed(seed)
+    return out
+
+
+
+
+class BatchedSB3VecEnv(_SB3VecEnv):
+    """Stable-Baselines3 VecEnv over the batched ConstrainedBiped vector env (SAME_STEP resets).
+
+    Actions arrive in [-1, 1] and are scaled to N m by the torque limit; a finished episode's
+    last observation is ``infos[i]["terminal_observation"]`` and a time-limit end sets
+    ``infos[i]["TimeLimit.truncated"]``, as SB3 expects. Each info also carries the env's
+    ``steps_completed``, ``hip_y`` and ``termination_reason``.
+    """
+
+    def __init__(self, venv):
+        """Wrap ``venv`` (a ConstrainedBipedVectorEnv in SAME_STEP autoreset mode)."""
+        from gymnasium import spaces
+
+        self.venv = venv
+        self.limit = float(venv.single_action_space.high[0])
+        super().__init__(venv.num_envs, venv.single_observation_space,
+                         spaces.Box(-1.0, 1.0, (5,), np.float32))
+        self._actions = None
+
+    def reset(self):
+        """Reset all sub-environments (seeded by ``seed()`` if it was called)."""
+        seed = self._seeds[0]
+        obs, _ = self.venv.reset(seed=seed)
+        self._reset_seeds()
+        return obs.astype(np.float32)
+
+    def step_async(self, actions):
+        """Store the actions for step_wait."""
+        self._actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0) * self.limit
+
+    def step_wait(self):
+        """Step the batch; returns (obs, rewards, dones, infos)."""
+        obs, rew, term, trunc, info = self.venv.step(self._actions)
+        dones = term | trunc
+        infos = []
+        for i in range(self.num_envs):
+            d = {"steps_completed": int(info["steps_completed"][i]), "hip_y": float(info["hip_y"][i]),
+                 "termination_reason": info["termination_reason"][i]}
+            if dones[i]:
+                d["terminal_observation"] = info["final_obs"][i].astype(np.float32)
+                d["TimeLimit.truncated"] = bool(trunc[i] and not term[i])
+                fi = info["final_info"][i]
+                d.update(steps_completed=int(fi["steps_completed"]), hip_y=float(fi["hip_y"]),
+                         termination_reason=fi["termination_reason"])
+            infos.append(d)
+        return obs.astype(np.float32), rew.astype(np.float32), dones, infos
+
+    def close(self):
+        """Close the batch."""
+        self.venv.close()
+
+    def get_attr(self, attr_name, indices=None):
+        """The batch's attribute, once per requested index."""
+        return [getattr(self.venv, attr_name) for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name, value, indices=None):
+        """Set an attribute of the batch."""
+        setattr(self.venv, attr_name, value)
+
+    def env_method(self, method_name, *args, indices=None, **kwargs):
+        """Call a method of the batch, once per requested index."""
+        return [getattr(self.venv, method_name)(*args, **kwargs) for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class, indices=None):
+        """The batch has no per-env Gymnasium wrappers."""
+        return [False for _ in self._get_indices(indices)]
