@@ -248,26 +248,32 @@ def check_start_state(params: BipedParams, state: SimState) -> None:
             )
 
 
-def reward_terms(
-    progress_m: np.ndarray,
-    dt: float,
-    steps: np.ndarray,
-    tau: np.ndarray,
-    limit: float,
-    w_forward: float,
-    w_step: float,
-    w_ctrl: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(forward, step, ctrl) reward terms of one control period for n envs (see Rewards).
+REWARD_TERMS = ("reward_forward", "reward_alive", "reward_switch", "reward_step", "reward_ctrl")
+"""Names of the reward terms in ``info`` (their sum is the reward)."""
+
+
+def cycle_position(mode: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """4 * steps + (mode - 1): increases by one at every forward model switch."""
+    return 4 * steps + (mode - 1)
+
+
+def reward_terms(progress_m: np.ndarray, dt: float, switches: np.ndarray, steps: np.ndarray,
+                 alive: np.ndarray, tau: np.ndarray, limit: float, w_forward: float,
+                 w_alive: float, w_switch: float, w_step: float,
+                 w_ctrl: float) -> tuple[np.ndarray, ...]:
+    """The reward terms of one control period for n envs, in REWARD_TERMS order (see Rewards).
 
     Args:
-        progress_m: (n,) hip progress [m]. dt: control period [s]. steps: (n,) walking steps
-            completed in the period. tau: (n, 5) applied torques [N m]. limit: torque bound.
-        w_forward, w_step, w_ctrl: the weights.
+        progress_m: (n,) hip progress [m]. dt: control period [s]. switches: (n,) forward model
+            switches in the period. steps: (n,) walking steps completed in the period.
+            alive: (n,) whether the period did not end in a termination. tau: (n, 5) applied
+            torques [N m]. limit: torque bound [N m]. w_*: the weights.
     """
     return (
         w_forward * progress_m / dt,
-        w_step * steps,
+        w_alive * alive.astype(np.float64),
+        w_switch * switches.astype(np.float64),
+        w_step * steps.astype(np.float64),
         -w_ctrl * np.sum(tau * tau, axis=1) / (limit * limit),
     )
 
@@ -324,11 +330,15 @@ class ConstrainedBipedEnv(gym.Env):
     number (1-4).
 
     ## Rewards
-    ``reward = reward_forward + reward_step + reward_ctrl`` with
+    ``reward = reward_forward + reward_alive + reward_switch + reward_step + reward_ctrl``:
     ``reward_forward = forward_reward_weight * (hip_y' - hip_y) / dt`` (hip progress),
+    ``reward_alive = alive_bonus`` for a period not ended by an out-of-model event,
+    ``reward_switch = switch_bonus * (forward model switches in this period)``,
     ``reward_step = step_bonus * (walking steps completed in this period)`` and
-    ``reward_ctrl = -ctrl_cost_weight * sum((tau / torque_limit_nm)^2)``. Defaults 1.0, 5.0,
-    0.1. There is no fall penalty (it makes agents timid). ``info`` contains each term.
+    ``reward_ctrl = -ctrl_cost_weight * sum((tau / torque_limit_nm)^2)``. Defaults 1.0, 0.5,
+    1.0, 5.0, 0.1. There is no fall penalty (it makes agents timid); the small alive and switch
+    bonuses reward staying inside the models and moving through the cycle, which the forward
+    term alone does not (it pays for a lunge). ``info`` contains each term.
 
     ## Starting State
     Model 1, leg A standing, stance toe at y = 0, at rest, with
@@ -361,6 +371,8 @@ class ConstrainedBipedEnv(gym.Env):
     | torque_limit_nm | float | 150 | action bound [N m] | action |
     | out_of_range | str | "clip" | "clip" or "raise" | action |
     | forward_reward_weight | float | 1.0 | per (m/s) of hip progress | reward |
+    | alive_bonus | float | 0.5 | per control period inside the models | reward |
+    | switch_bonus | float | 1.0 | per forward model switch | reward |
     | step_bonus | float | 5.0 | per completed walking step | reward |
     | ctrl_cost_weight | float | 0.1 | per unit of sum((tau/limit)^2) | reward |
     | reset_noise_scale | float | 0.01 | uniform noise on q1..q5 [rad] | start |
@@ -396,6 +408,8 @@ class ConstrainedBipedEnv(gym.Env):
         torque_limit_nm: float = TORQUE_LIMIT_NM,
         out_of_range: str = "clip",
         forward_reward_weight: float = 1.0,
+        alive_bonus: float = 0.5,
+        switch_bonus: float = 1.0,
         step_bonus: float = 5.0,
         ctrl_cost_weight: float = 0.1,
         reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
@@ -440,7 +454,8 @@ class ConstrainedBipedEnv(gym.Env):
         check_start_state(self.params, SimState(0.0, 1, 0, self.posture, np.zeros(N_LINKS)))
         self.torque_limit_nm = float(torque_limit_nm)
         self.out_of_range = out_of_range
-        self.weights = (float(forward_reward_weight), float(step_bonus), float(ctrl_cost_weight))
+        self.weights = (float(forward_reward_weight), float(alive_bonus), float(switch_bonus),
+                        float(step_bonus), float(ctrl_cost_weight))
         self.reset_noise_scale = float(reset_noise_scale)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
@@ -477,11 +492,7 @@ class ConstrainedBipedEnv(gym.Env):
             self._sim.q[0] = sample_initial_q(self.np_random, self.posture, self.reset_noise_scale)
             start_sampled(self.params, self.options, self._sim, np.zeros(1, np.int64))
         self._observe()
-        info = self._info(
-            events=(),
-            terms={"reward_forward": 0.0, "reward_step": 0.0, "reward_ctrl": 0.0},
-            reason=None,
-        )
+        info = self._info(events=(), terms=dict.fromkeys(REWARD_TERMS, 0.0), reason=None)
         if self.render_mode == "human":
             self.render()
         return self._obs[0].copy(), info
@@ -493,6 +504,7 @@ class ConstrainedBipedEnv(gym.Env):
             raise RuntimeError("step() called after the episode ended; call reset()")
         hip_y0 = self._hip[0, 0]
         steps0 = self._sim.ist[0, 2]
+        pos0 = cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2])
         self._tau_table[0] = tau
         advance(self.params, self._sim, self._tau_table, self.dt, self.options)
         self._observe()
@@ -503,20 +515,18 @@ class ConstrainedBipedEnv(gym.Env):
             reason = next(e.code.name.lower() for e in events if e.terminal)
         elif status == STATUS_NONFINITE:
             reason = TERMINATION_NON_FINITE
-        r_fwd, r_step, r_ctrl = reward_terms(
+        parts = reward_terms(
             self._hip[:, 0] - hip_y0,
             self.dt,
+            cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2]) - pos0,
             self._sim.ist[:, 2] - steps0,
+            np.array([reason is None]),
             tau[None, :],
             self.torque_limit_nm,
             *self.weights,
         )
-        terms = {
-            "reward_forward": float(r_fwd[0]),
-            "reward_step": float(r_step[0]),
-            "reward_ctrl": float(r_ctrl[0]),
-        }
-        reward = float((r_fwd + r_step + r_ctrl)[0])
+        terms = {k: float(v[0]) for k, v in zip(REWARD_TERMS, parts, strict=True)}
+        reward = float(sum(parts)[0])
         info = self._info(events, terms, reason)
         if self.render_mode == "human":
             self.render()

@@ -24,6 +24,8 @@ from .env import (
     TERMINATION_NON_FINITE,
     ConstrainedBipedEnv,
     check_start_state,
+    REWARD_TERMS,
+    cycle_position,
     nb_observe,
     reward_terms,
     sample_initial_q,
@@ -129,30 +131,28 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._sim.status[resetting] = -1  # skipped by the batch step this period
         hip0 = self._hip[:, 0].copy()
         steps0 = self._sim.ist[:, 2].copy()
+        pos0 = cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2])
         self._tau[:] = tau[:, None, :]
         advance(self.params, self._sim, self._tau, self.dt, self.options)
         self._sim.status[resetting] = 0
         self._sim.n_events[resetting] = 0
         self._observe()
-        r_fwd, r_step, r_ctrl = reward_terms(
-            self._hip[:, 0] - hip0,
-            self.dt,
-            self._sim.ist[:, 2] - steps0,
-            tau,
-            p.torque_limit_nm,
-            *p.weights,
-        )
-        r_step = r_step.astype(np.float64)
-        r_fwd[resetting] = r_step[resetting] = r_ctrl[resetting] = 0.0
-        rewards = r_fwd + r_step + r_ctrl
         status = self._sim.status
         terminated = (status == STATUS_TERMINATED) | (status == STATUS_NONFINITE)
+        parts = reward_terms(
+            self._hip[:, 0] - hip0, self.dt,
+            cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2]) - pos0,
+            self._sim.ist[:, 2] - steps0, ~terminated, tau, p.torque_limit_nm, *p.weights,
+        )
+        for part in parts:
+            part[resetting] = 0.0
+        rewards = sum(parts)
         self._elapsed += 1
         self._elapsed[resetting] = 0
         truncated = np.zeros(self.num_envs, bool)
         if self.max_episode_steps is not None:
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
-        infos = self._infos(np.zeros(self.num_envs), (r_fwd, r_step, r_ctrl))
+        infos = self._infos(np.zeros(self.num_envs), parts)
         done = np.flatnonzero(terminated | truncated)
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:
             final_obs = np.full(self.num_envs, None, dtype=object)
@@ -185,7 +185,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
                 reasons[i] = TERMINATION_NON_FINITE
             else:
                 reasons[i] = next(e.code.name.lower() for e in s.events_of(int(i)) if e.terminal)
-        r_fwd, r_step, r_ctrl = terms if terms is not None else (zeros, zeros, zeros)
+        parts = terms if terms is not None else (zeros,) * len(REWARD_TERMS)
         info = {
             "mode": s.ist[:, 0].copy(),
             "stance_side": s.ist[:, 1].copy(),
@@ -193,9 +193,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             "t": s.fst[:, 0].copy(),
             "hip_y": self._hip[:, 0].copy(),
             "termination_reason": reasons,
-            "reward_forward": r_fwd,
-            "reward_step": r_step,
-            "reward_ctrl": r_ctrl,
+            **dict(zip(REWARD_TERMS, parts, strict=True)),
         }
         everyone = np.ones(self.num_envs, bool)
         info.update({f"_{k}": everyone for k in list(info)})

@@ -9,7 +9,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import biped_constraint_env  # noqa: F401
-from biped_constraint_env.env import OBS_NAMES, ConstrainedBipedEnv
+from biped_constraint_env.env import OBS_NAMES, REWARD_TERMS, ConstrainedBipedEnv
 from biped_constraint_env.modes import Mode
 
 ENV_ID = "ConstrainedBiped-v0"
@@ -81,9 +81,7 @@ def test_obs_in_space_and_reward_equals_terms():
     env = gym.make(ENV_ID)
     for obs, r, info in _rollout(env, 3, 600):
         assert env.observation_space.contains(obs)
-        assert r == pytest.approx(
-            info["reward_forward"] + info["reward_step"] + info["reward_ctrl"], abs=1e-12
-        )
+        assert r == pytest.approx(sum(info[k] for k in REWARD_TERMS), abs=1e-12)
 
 
 def test_info_consistent_with_state():
@@ -215,3 +213,16 @@ def test_unwrapped_exposes_state():
     env.reset(seed=0)
     st = env.unwrapped.state
     assert st.mode == Mode.FOOT_FLAT and st.stance_side == 0 and st.q.shape == (6,)
+
+
+def test_switch_and_alive_terms():
+    """A period with the 1 -> 2 switch earns the switch bonus; a terminating one no alive bonus."""
+    env = ConstrainedBipedEnv()
+    env.reset(seed=0)
+    _, _, te, _, info = env.step(np.array([60.0, 0, 0, 0, 0]))  # ankle torque lifts the heel
+    assert info["switches"] and info["switches"][0][1:] == (1, 2)
+    assert info["reward_switch"] == pytest.approx(1.0 * len(info["switches"]))
+    assert info["reward_alive"] == (0.0 if te else 0.5)
+    env.reset(seed=0)
+    _, _, te, _, info = env.step(np.array([-150.0, 0, 0, 0, 0]))
+    assert te and info["reward_alive"] == 0.0
