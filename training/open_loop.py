@@ -46,6 +46,7 @@ class OpenLoopConfig:
     env_id: str = "ConstrainedBiped-v0"
     preset: str = "paper"  # "paper" (the paper's numerics) or "default"
     table: str = "table2"  # a key of TABLES
+    torques: tuple[float, ...] = ()  # 20 values [N m] (models 1-4 x joints 1-5): replaces `table`
     signs: tuple[int, ...] = (1, 1, 1, 1, 1)  # paper-to-project sign of each joint's torque
     posture: tuple[float, ...] = NOMINAL_POSTURE_RAD  # initial model-1 q [rad]
     dt: float = 0.02  # control period [s] (the paper's sample time)
@@ -56,14 +57,25 @@ class OpenLoopConfig:
     progress: bool = True
 
 
-def run(cfg: OpenLoopConfig, record_frames: bool = True) -> dict:
-    """Roll out the table; returns the summary (and per-period records under ``"frames"``)."""
-    if cfg.table not in TABLES:
-        raise ValueError(f"table must be one of {sorted(TABLES)}, got {cfg.table!r}")
+def torque_table(cfg: OpenLoopConfig) -> np.ndarray:
+    """(4, 5) torques [N m] of the config: ``torques`` if given, else TABLES[table] * signs."""
     signs = np.asarray(cfg.signs, dtype=np.float64)
     if signs.shape != (5,) or not np.all(np.abs(signs) == 1):
         raise ValueError(f"signs must be five values of +1 or -1, got {cfg.signs!r}")
-    table = TABLES[cfg.table] * signs
+    if cfg.torques:
+        t = np.asarray(cfg.torques, dtype=np.float64)
+        if t.shape != (20,) or not np.all(np.isfinite(t)):
+            raise ValueError(f"torques must be 20 finite values, got {len(cfg.torques)}")
+        return t.reshape(4, 5) * signs
+    if cfg.table not in TABLES:
+        raise ValueError(f"table must be one of {sorted(TABLES)}, got {cfg.table!r}")
+    return TABLES[cfg.table] * signs
+
+
+def run(cfg: OpenLoopConfig, record_frames: bool = True, reset_seed: int | None = None,
+        noise: float = 0.0) -> dict:
+    """Roll out the table; returns the summary (and per-period records under ``"frames"``)."""
+    table = torque_table(cfg)
     env = gym.make(
         cfg.env_id,
         preset=cfg.preset,
@@ -72,7 +84,10 @@ def run(cfg: OpenLoopConfig, record_frames: bool = True) -> dict:
         render_mode="rgb_array" if (record_frames and cfg.gif) else None,
         max_episode_steps=cfg.max_periods,
     )
-    obs, info = env.reset(seed=cfg.seed, options={"q": np.asarray(cfg.posture), "mode": 1})
+    if reset_seed is None:
+        obs, info = env.reset(seed=cfg.seed, options={"q": np.asarray(cfg.posture), "mode": 1})
+    else:  # the env's own noisy start around the posture
+        obs, info = env.reset(seed=reset_seed)
     u = env.unwrapped
     y0 = info["hip_y"]
     frames, images, switches, events = [], [], [], []
