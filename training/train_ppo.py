@@ -43,7 +43,8 @@ class PPOConfig:
     gae_lambda: float = 0.95
     clip_range: float = 0.2
     ent_coef: float = 0.0
-    log_std_init: float = -1.5  # initial action std 0.22 (33 N m); SB3's 0 (std 150 N m) topples at once
+    log_std_init: float = -3.0  # action std 0.05 (7.5 N m): the flat stance foot tolerates only
+    # about +-11 N m of ankle moment before an end unloads; SB3's 0 (150 N m) breaks contact at once
     net_arch: tuple[int, ...] = (256, 256)
     torch_threads: int = 1
     eval_freq: int = 100_000  # env steps between evaluations
