@@ -102,7 +102,9 @@ def run_hybrid(chs, scs, q0, qd0, mode0, dt, n, iopt, fopt, a, b):
             resid = max(resid, abs(K[5, K_OZ] + off * K[5, K_SIN]))
         if k == n:
             break
-        st, ne = nb_advance_w(chs, scs, q, qd, ist, fst, tau, dt, iopt, fopt, a, b, ev, forces, W, S)
+        st, ne = nb_advance_w(
+            chs, scs, q, qd, ist, fst, tau, dt, iopt, fopt, a, b, ev, forces, W, S
+        )
         for e in range(ne):
             if ne_tot < 64:
                 events[ne_tot] = ev[e, :4]
@@ -134,10 +136,36 @@ def scene_a(params, quick):
     h_ref = 1e-5
     n_ref = int(round(T / h_ref))
     every_ref = int(round(0.02 / h_ref))
-    ref, _ = integrate_free(ch.packed, ch.packed_scalars, 1, POSTURE, np.zeros(6), tau6, h_ref,
-                            n_ref, every_ref, iopt, fopt, a, b)
-    ref2, _ = integrate_free(ch.packed, ch.packed_scalars, 1, POSTURE, np.zeros(6), tau6,
-                             2 * h_ref, n_ref // 2, every_ref // 2, iopt, fopt, a, b)
+    ref, _ = integrate_free(
+        ch.packed,
+        ch.packed_scalars,
+        1,
+        POSTURE,
+        np.zeros(6),
+        tau6,
+        h_ref,
+        n_ref,
+        every_ref,
+        iopt,
+        fopt,
+        a,
+        b,
+    )
+    ref2, _ = integrate_free(
+        ch.packed,
+        ch.packed_scalars,
+        1,
+        POSTURE,
+        np.zeros(6),
+        tau6,
+        2 * h_ref,
+        n_ref // 2,
+        every_ref // 2,
+        iopt,
+        fopt,
+        a,
+        b,
+    )
     ref_err = float(np.abs(ref2 - ref).max())
     rows = []
     variants = [(m, "crba") for m in METHODS] + [("rk4", "newton_euler_columns")]
@@ -147,15 +175,53 @@ def scene_a(params, quick):
         for sub in SUBSTEPS if not quick else SUBSTEPS[:6]:
             h = 0.02 / sub
             n = int(round(T / h))
-            out, evals = integrate_free(ch.packed, ch.packed_scalars, 1, POSTURE, np.zeros(6), tau6,
-                                        h, n, sub, iopt, fopt, a, b)
+            out, evals = integrate_free(
+                ch.packed,
+                ch.packed_scalars,
+                1,
+                POSTURE,
+                np.zeros(6),
+                tau6,
+                h,
+                n,
+                sub,
+                iopt,
+                fopt,
+                a,
+                b,
+            )
             stable = bool(np.all(np.isfinite(out)))
             err = float(np.abs(_wrap(out - ref)).max()) if stable else np.inf
-            wall = best_time(lambda: integrate_free(ch.packed, ch.packed_scalars, 1, POSTURE,
-                                                    np.zeros(6), tau6, h, n, sub, iopt, fopt, a, b))
-            rows.append({"scene": "a", "method": method, "mass_matrix": mass, "h_ms": h * 1e3,
-                         "substeps_per_20ms": sub, "stable": stable, "max_angle_err_rad": err,
-                         "us_per_sim_s": wall / T * 1e6, "evals_per_sim_s": evals / T})
+            wall = best_time(
+                lambda: integrate_free(
+                    ch.packed,
+                    ch.packed_scalars,
+                    1,
+                    POSTURE,
+                    np.zeros(6),
+                    tau6,
+                    h,
+                    n,
+                    sub,
+                    iopt,
+                    fopt,
+                    a,
+                    b,
+                )
+            )
+            rows.append(
+                {
+                    "scene": "a",
+                    "method": method,
+                    "mass_matrix": mass,
+                    "h_ms": h * 1e3,
+                    "substeps_per_20ms": sub,
+                    "stable": stable,
+                    "max_angle_err_rad": err,
+                    "us_per_sim_s": wall / T * 1e6,
+                    "evals_per_sim_s": evals / T,
+                }
+            )
     return rows, ref_err
 
 
@@ -180,19 +246,24 @@ def scene_b(params, quick):
     T = 0.3
     n = int(round(T / 0.02))
     ref_opts = SimOptions(integrator="rk4", substeps=400, strict=False)
-    phys_ref, ev_ref, res_ref, _ = run_hybrid(chs, scs, q0, np.zeros(6), 2, 0.02, n,
-                                              *ref_opts.packed)
+    phys_ref, ev_ref, res_ref, _ = run_hybrid(
+        chs, scs, q0, np.zeros(6), 2, 0.02, n, *ref_opts.packed
+    )
     sw_ref = ev_ref[ev_ref[:, 1] == 0]
     rows = []
     variants = []
     for method in METHODS:
         variants.append((method, True, "exact"))
-    variants += [("rk2", False, "exact"), ("euler", False, "finite_difference"),
-                 ("rk2", True, "finite_difference")]
+    variants += [
+        ("rk2", False, "exact"),
+        ("euler", False, "finite_difference"),
+        ("rk2", True, "finite_difference"),
+    ]
     for method, locate, jdot in variants:
         for sub in SUBSTEPS if not quick else SUBSTEPS[:6]:
-            opts = SimOptions(integrator=method, substeps=sub, strict=False, locate_events=locate,
-                              jdot=jdot)
+            opts = SimOptions(
+                integrator=method, substeps=sub, strict=False, locate_events=locate, jdot=jdot
+            )
             packed = opts.packed
             phys, ev, resid, evals = run_hybrid(chs, scs, q0, np.zeros(6), 2, 0.02, n, *packed)
             sw = ev[ev[:, 1] == 0]
@@ -202,11 +273,22 @@ def scene_b(params, quick):
             err = float(np.abs(_wrap(phys[rows_ref] - phys_ref[rows_ref])).max()) if ok else np.inf
             t_err = float(np.abs(sw[: len(sw_ref), 0] - sw_ref[:, 0]).max()) if ok else np.inf
             wall = best_time(lambda: run_hybrid(chs, scs, q0, np.zeros(6), 2, 0.02, n, *packed))
-            rows.append({"scene": "b", "method": method, "locate_events": locate, "jdot": jdot,
-                         "h_ms": 20.0 / sub, "substeps_per_20ms": sub, "same_switches": ok,
-                         "max_angle_err_rad": err, "switch_time_err_s": t_err,
-                         "contact_residual_m": float(resid),
-                         "us_per_sim_s": wall / T * 1e6, "evals_per_sim_s": evals / T})
+            rows.append(
+                {
+                    "scene": "b",
+                    "method": method,
+                    "locate_events": locate,
+                    "jdot": jdot,
+                    "h_ms": 20.0 / sub,
+                    "substeps_per_20ms": sub,
+                    "same_switches": ok,
+                    "max_angle_err_rad": err,
+                    "switch_time_err_s": t_err,
+                    "contact_residual_m": float(resid),
+                    "us_per_sim_s": wall / T * 1e6,
+                    "evals_per_sim_s": evals / T,
+                }
+            )
     return rows, [(float(t), int(a), int(b)) for t, _, a, b in sw_ref], float(res_ref)
 
 
@@ -214,8 +296,10 @@ def stability_map(params, quick):
     ch = params.chain(0)
     tau6 = np.concatenate([[0.0], TABLE2_ROW1])
     rng = np.random.default_rng(0)
-    postures = [POSTURE] + [POSTURE + np.concatenate([[0.0], rng.uniform(-0.4, 0.4, 5)])
-                            for _ in range(2 if quick else 5)]
+    postures = [POSTURE] + [
+        POSTURE + np.concatenate([[0.0], rng.uniform(-0.4, 0.4, 5)])
+        for _ in range(2 if quick else 5)
+    ]
     D = dyn.damping_matrix(ch)[1:, 1:]
     out = []
     for p_i, q in enumerate(postures):
@@ -227,8 +311,9 @@ def stability_map(params, quick):
 
             def stable(h):
                 n = int(round(1.0 / h))
-                res, _ = integrate_free(ch.packed, ch.packed_scalars, 1, q, np.zeros(6), tau6, h,
-                                        n, n, iopt, fopt, a, b)
+                res, _ = integrate_free(
+                    ch.packed, ch.packed_scalars, 1, q, np.zeros(6), tau6, h, n, n, iopt, fopt, a, b
+                )
                 return bool(np.all(np.isfinite(res)))
 
             lo, hi = 1e-4, 0.1
@@ -240,8 +325,15 @@ def stability_map(params, quick):
                     lo, hi = (mid, hi) if stable(mid) else (lo, mid)
                 h_max = lo
             theory = STABILITY_CONSTANT[Integrator[method.upper()]] / lam
-            out.append({"posture": p_i, "method": method, "lambda_max_per_s": lam,
-                        "h_stable_ms": h_max * 1e3, "h_theory_ms": theory * 1e3})
+            out.append(
+                {
+                    "posture": p_i,
+                    "method": method,
+                    "lambda_max_per_s": lam,
+                    "h_stable_ms": h_max * 1e3,
+                    "h_theory_ms": theory * 1e3,
+                }
+            )
     return out
 
 
@@ -254,7 +346,9 @@ def mujoco_validation(params):
 
     ch = params.chain(0)
     model, data = build(ch, 1e-4)
-    M_err = float(np.abs(mass_matrix(model, data, POSTURE[1:]) - dyn.mass_matrix(ch, POSTURE)[1:, 1:]).max())
+    M_err = float(
+        np.abs(mass_matrix(model, data, POSTURE[1:]) - dyn.mass_matrix(ch, POSTURE)[1:, 1:]).max()
+    )
     t_mj = best_time(lambda: simulate(model, data, POSTURE[1:], TABLE2_ROW1, 1.0, 100))
     _, q_mj = simulate(model, data, POSTURE[1:], TABLE2_ROW1, 1.0, 100)
     opts = SimOptions(integrator="rk4")
@@ -262,16 +356,32 @@ def mujoco_validation(params):
     tau6 = np.concatenate([[0.0], TABLE2_ROW1])
 
     def ours():
-        return integrate_free(ch.packed, ch.packed_scalars, 1, POSTURE, np.zeros(6), tau6, 1e-4,
-                              10000, 100, iopt, fopt, a, b)
+        return integrate_free(
+            ch.packed,
+            ch.packed_scalars,
+            1,
+            POSTURE,
+            np.zeros(6),
+            tau6,
+            1e-4,
+            10000,
+            100,
+            iopt,
+            fopt,
+            a,
+            b,
+        )
 
     q_ours = ours()[0][:, 1:]
     t_ours = best_time(ours)
-    return {"mass_matrix_max_abs_diff": M_err,
-            "trajectory_max_abs_diff_rad": float(np.abs(q_ours - q_mj).max()),
-            "integrator": "RK4, h = 0.1 ms, 1 s, Table 2 model-1 torques",
-            "mujoco_s_per_sim_s": t_mj, "ours_s_per_sim_s": t_ours,
-            "mujoco_version": __import__("mujoco").__version__}
+    return {
+        "mass_matrix_max_abs_diff": M_err,
+        "trajectory_max_abs_diff_rad": float(np.abs(q_ours - q_mj).max()),
+        "integrator": "RK4, h = 0.1 ms, 1 s, Table 2 model-1 torques",
+        "mujoco_s_per_sim_s": t_mj,
+        "ours_s_per_sim_s": t_ours,
+        "mujoco_version": __import__("mujoco").__version__,
+    }
 
 
 def plot(rows_a, rows_b, stab, path_a, path_b, path_s):
@@ -280,23 +390,49 @@ def plot(rows_a, rows_b, stab, path_a, path_b, path_s):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    for rows, path, title in ((rows_a, path_a, "scene (a): model 1, Table 2 row 1, 1 s"),
-                              (rows_b, path_b, "scene (b): 2 -> 3 -> 4 with impacts, 0.3 s")):
+    for rows, path, title in (
+        (rows_a, path_a, "scene (a): model 1, Table 2 row 1, 1 s"),
+        (rows_b, path_b, "scene (b): 2 -> 3 -> 4 with impacts, 0.3 s"),
+    ):
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-        keys = sorted({tuple(v for k, v in r.items() if k in ("method", "mass_matrix", "locate_events", "jdot"))
-                       for r in rows})
+        keys = sorted(
+            {
+                tuple(
+                    v
+                    for k, v in r.items()
+                    if k in ("method", "mass_matrix", "locate_events", "jdot")
+                )
+                for r in rows
+            }
+        )
         for key in keys:
-            sel = [r for r in rows if tuple(v for k, v in r.items()
-                                            if k in ("method", "mass_matrix", "locate_events", "jdot")) == key
-                   and np.isfinite(r["max_angle_err_rad"])]
+            sel = [
+                r
+                for r in rows
+                if tuple(
+                    v
+                    for k, v in r.items()
+                    if k in ("method", "mass_matrix", "locate_events", "jdot")
+                )
+                == key
+                and np.isfinite(r["max_angle_err_rad"])
+            ]
             if not sel:
                 continue
             label = " / ".join(str(k) for k in key)
             for ax, xkey in zip(axes, ("us_per_sim_s", "evals_per_sim_s"), strict=True):
-                ax.loglog([r[xkey] for r in sel], [max(r["max_angle_err_rad"], 1e-16) for r in sel],
-                          "o-", ms=3, label=label)
-        for ax, xl in zip(axes, ("wall time per simulated second [us]",
-                                 "dynamics evaluations per simulated second"), strict=True):
+                ax.loglog(
+                    [r[xkey] for r in sel],
+                    [max(r["max_angle_err_rad"], 1e-16) for r in sel],
+                    "o-",
+                    ms=3,
+                    label=label,
+                )
+        for ax, xl in zip(
+            axes,
+            ("wall time per simulated second [us]", "dynamics evaluations per simulated second"),
+            strict=True,
+        ):
             ax.set_xlabel(xl)
             ax.set_ylabel("max link-angle error [rad]")
             ax.axhline(1e-3, color="k", lw=0.6, ls="--")
@@ -309,8 +445,9 @@ def plot(rows_a, rows_b, stab, path_a, path_b, path_s):
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for method, marker in (("euler", "o"), ("rk2", "s"), ("rk4", "^")):
         sel = [s for s in stab if s["method"] == method]
-        ax.loglog([s["h_theory_ms"] for s in sel], [s["h_stable_ms"] for s in sel], marker,
-                  label=method)
+        ax.loglog(
+            [s["h_theory_ms"] for s in sel], [s["h_stable_ms"] for s in sel], marker, label=method
+        )
     lim = [1, 30]
     ax.plot(lim, lim, "k--", lw=0.7, label="found = theory")
     ax.axhline(20.0, color="tab:red", lw=0.7, label="paper's 20 ms")
@@ -325,8 +462,10 @@ def plot(rows_a, rows_b, stab, path_a, path_b, path_s):
 
 def _md(rows, cols):
     head = "| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n"
+
     def fmt(v):
         return f"{v:.3g}" if isinstance(v, float) else str(v)
+
     return head + "".join("| " + " | ".join(fmt(r[c]) for c in cols) + " |\n" for r in rows)
 
 
@@ -342,7 +481,9 @@ def main(argv=None) -> int:
     results = {}
     for name in progress(["a", "b", "stability", "mujoco"], 4, "accuracy study"):
         if name == "a":
-            results["scene_a"], results["scene_a_reference_self_error_rad"] = scene_a(params, args.quick)
+            results["scene_a"], results["scene_a_reference_self_error_rad"] = scene_a(
+                params, args.quick
+            )
         elif name == "b":
             rows, sw, res = scene_b(params, args.quick)
             results["scene_b"], results["scene_b_reference_switches"] = rows, sw
@@ -351,18 +492,49 @@ def main(argv=None) -> int:
             results["stability"] = stability_map(params, args.quick)
         else:
             results["mujoco"] = mujoco_validation(params)
-    plot(results["scene_a"], results["scene_b"], results["stability"],
-         args.out / "work_precision_a.png", args.out / "work_precision_b.png",
-         args.out / "stability_map.png")
+    plot(
+        results["scene_a"],
+        results["scene_b"],
+        results["stability"],
+        args.out / "work_precision_a.png",
+        args.out / "work_precision_b.png",
+        args.out / "stability_map.png",
+    )
     (args.out / "accuracy.json").write_text(json.dumps(results, indent=1) + "\n")
-    md = ("## scene (a)\n" + _md(results["scene_a"], ["method", "mass_matrix", "h_ms", "max_angle_err_rad",
-                                                      "us_per_sim_s", "evals_per_sim_s"])
-          + "\n## scene (b)\n" + _md(results["scene_b"], ["method", "locate_events", "jdot", "h_ms",
-                                                          "max_angle_err_rad", "switch_time_err_s",
-                                                          "contact_residual_m", "us_per_sim_s",
-                                                          "evals_per_sim_s"])
-          + "\n## stability\n" + _md(results["stability"], ["posture", "method", "lambda_max_per_s",
-                                                             "h_stable_ms", "h_theory_ms"]))
+    md = (
+        "## scene (a)\n"
+        + _md(
+            results["scene_a"],
+            [
+                "method",
+                "mass_matrix",
+                "h_ms",
+                "max_angle_err_rad",
+                "us_per_sim_s",
+                "evals_per_sim_s",
+            ],
+        )
+        + "\n## scene (b)\n"
+        + _md(
+            results["scene_b"],
+            [
+                "method",
+                "locate_events",
+                "jdot",
+                "h_ms",
+                "max_angle_err_rad",
+                "switch_time_err_s",
+                "contact_residual_m",
+                "us_per_sim_s",
+                "evals_per_sim_s",
+            ],
+        )
+        + "\n## stability\n"
+        + _md(
+            results["stability"],
+            ["posture", "method", "lambda_max_per_s", "h_stable_ms", "h_theory_ms"],
+        )
+    )
     (args.out / "accuracy_tables.md").write_text(md)
     print(md)
     print("scene (b) reference switches:", results["scene_b_reference_switches"])

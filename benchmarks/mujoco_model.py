@@ -24,16 +24,22 @@ def make_mjcf(chain: ChainModel, timestep: float = INTEGRATOR_TIMESTEP_S) -> str
 
     def inertial(i, com_z):
         ixx = ch[i, COL_INERTIA]
-        return (f'<inertial pos="0 0 {com_z:.17g}" mass="{ch[i, COL_MASS]:.17g}" '
-                f'diaginertia="{ixx:.17g} {ixx:.17g} {ixx:.17g}"/>')
+        return (
+            f'<inertial pos="0 0 {com_z:.17g}" mass="{ch[i, COL_MASS]:.17g}" '
+            f'diaginertia="{ixx:.17g} {ixx:.17g} {ixx:.17g}"/>'
+        )
 
     def joint(i):
-        return (f'<joint name="j{i}" type="hinge" axis="1 0 0" damping="{ch[i, COL_DAMPING]:.17g}" '
-                f'armature="0" frictionloss="0" limited="false"/>')
+        return (
+            f'<joint name="j{i}" type="hinge" axis="1 0 0" damping="{ch[i, COL_DAMPING]:.17g}" '
+            f'armature="0" frictionloss="0" limited="false"/>'
+        )
 
     ankle_y = -0.5 * lengths[0]
-    body = (f'<body name="foot_b" pos="0 0 {up[4] * lengths[4]:.17g}">{joint(5)}'
-            f'{inertial(5, 0.0)}</body>')
+    body = (
+        f'<body name="foot_b" pos="0 0 {up[4] * lengths[4]:.17g}">{joint(5)}'
+        f"{inertial(5, 0.0)}</body>"
+    )
     for i in (4, 3, 2, 1):
         if i == 1:
             pos = f"0 {ankle_y:.17g} 0"
@@ -41,12 +47,15 @@ def make_mjcf(chain: ChainModel, timestep: float = INTEGRATOR_TIMESTEP_S) -> str
             pos = f"0 0 {lengths[2]:.17g}"
         else:
             pos = f"0 0 {up[i - 1] * lengths[i - 1]:.17g}"
-        body = (f'<body name="link{i}" pos="{pos}">{joint(i)}'
-                f'{inertial(i, up[i] * ch[i, COL_COM])}{body}</body>')
+        body = (
+            f'<body name="link{i}" pos="{pos}">{joint(i)}'
+            f"{inertial(i, up[i] * ch[i, COL_COM])}{body}</body>"
+        )
     motors = "".join(f'<motor joint="j{i}" gear="1" ctrllimited="false"/>' for i in range(1, 6))
     return (
         '<mujoco model="biped_model1">'
-        f'<option timestep="{timestep:.17g}" gravity="0 0 {-chain.gravity_mps2:.17g}" integrator="RK4">'
+        f'<option timestep="{timestep:.17g}" gravity="0 0 {-chain.gravity_mps2:.17g}" '
+        'integrator="RK4">'
         '<flag contact="disable"/></option>'
         f"<worldbody>{body}</worldbody><actuator>{motors}</actuator></mujoco>"
     )

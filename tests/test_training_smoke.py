@@ -2,10 +2,9 @@
 
 import json
 
-import pytest
-
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import biped_constraint_env  # noqa: F401
 from training import open_loop

@@ -47,7 +47,8 @@ def test_solver_mass_matrix_routes_agree(params, rng):
     out = []
     for columns in (False, True):
         W = nb_make_work()
-        fn = nb_solve_mode_w(ch.packed, ch.packed_scalars, 3, q, qd, tau, 0.0, 0.0, 1e-3, W, columns)[0]
+        args = (ch.packed, ch.packed_scalars, 3, q, qd, tau, 0.0, 0.0, 1e-3, W, columns)
+        fn = nb_solve_mode_w(*args)[0]
         out.append((W[10].copy(), fn))
     assert np.abs(out[0][0] - out[1][0]).max() < 1e-10 and out[0][1] == pytest.approx(out[1][1])
 

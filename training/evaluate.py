@@ -23,7 +23,7 @@ GIF_MAX_FRAMES = 500
 
 
 def load(run: Path, which: str):
-    """(model, vecnorm, config) of a run directory; ``which`` is "final", "best" or "checkpoints"."""
+    """(model, vecnorm, config) of a run directory; ``which``: "final", "best", "checkpoints"."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -47,11 +47,19 @@ def baselines() -> list[dict]:
     from training.open_loop import OpenLoopConfig, run
 
     rows = []
-    for label, kw in (("Table 2, paper preset", {}),
-                      ("Table 2, default preset", {"preset": "default", "dt": 0.002, "max_periods": 5000})):
+    for label, kw in (
+        ("Table 2, paper preset", {}),
+        ("Table 2, default preset", {"preset": "default", "dt": 0.002, "max_periods": 5000}),
+    ):
         out = run(OpenLoopConfig(gif=False, progress=False, **kw), record_frames=False)
-        rows.append({"controller": label, "steps_completed": out["steps_completed"],
-                     "distance_m": out["distance_m"], "end": out["end_reason"]})
+        rows.append(
+            {
+                "controller": label,
+                "steps_completed": out["steps_completed"],
+                "distance_m": out["distance_m"],
+                "end": out["end_reason"],
+            }
+        )
     return rows
 
 
@@ -88,23 +96,38 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         evaluate_policy_episodes(model, vecnorm, cfg, 1, args.seed + idx, record=record)
         plots.save_gif(images, out_dir / "figures" / f"{name}.gif", fps=50)
-        plots.stick_strip(frames, out_dir / "figures" / f"{name}_strip.png",
-                          f"{name} episode (seed {args.seed + idx}): "
-                          f"{eps[idx]['steps_completed']} steps, {eps[idx]['distance_m']:.2f} m",
-                          every=max(len(frames) // 15, 1))
+        plots.stick_strip(
+            frames,
+            out_dir / "figures" / f"{name}_strip.png",
+            f"{name} episode (seed {args.seed + idx}): "
+            f"{eps[idx]['steps_completed']} steps, {eps[idx]['distance_m']:.2f} m",
+            every=max(len(frames) // 15, 1),
+        )
     reasons = Counter(e["end"] for e in eps)
-    summary = {"episodes": eps, "steps_mean": steps.mean(), "steps_std": steps.std(),
-               "steps_min": int(steps.min()), "distance_mean_m": dist.mean(),
-               "distance_std_m": dist.std(), "distance_min_m": dist.min(), "ends": dict(reasons),
-               "which": args.which, "baselines": baselines()}
+    summary = {
+        "episodes": eps,
+        "steps_mean": steps.mean(),
+        "steps_std": steps.std(),
+        "steps_min": int(steps.min()),
+        "distance_mean_m": dist.mean(),
+        "distance_std_m": dist.std(),
+        "distance_min_m": dist.min(),
+        "ends": dict(reasons),
+        "which": args.which,
+        "baselines": baselines(),
+    }
     (out_dir / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
-    print(f"| controller | completed steps (mean ± std, min) | distance [m] (mean ± std) | ends |")
+    print("| controller | completed steps (mean ± std, min) | distance [m] (mean ± std) | ends |")
     print("|---|---|---|---|")
-    print(f"| PPO ({args.episodes} seeded episodes) | {steps.mean():.1f} ± {steps.std():.1f}, "
-          f"min {int(steps.min())} | {dist.mean():.2f} ± {dist.std():.2f} | {dict(reasons)} |")
+    print(
+        f"| PPO ({args.episodes} seeded episodes) | {steps.mean():.1f} ± {steps.std():.1f}, "
+        f"min {int(steps.min())} | {dist.mean():.2f} ± {dist.std():.2f} | {dict(reasons)} |"
+    )
     for b in summary["baselines"]:
-        print(f"| {b['controller']} (open loop) | {b['steps_completed']} | {b['distance_m']:.2f} | "
-              f"{b['end']} |")
+        print(
+            f"| {b['controller']} (open loop) | {b['steps_completed']} | {b['distance_m']:.2f} | "
+            f"{b['end']} |"
+        )
     print(f"figures in {out_dir / 'figures'}")
     return 0
 

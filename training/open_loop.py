@@ -72,8 +72,12 @@ def torque_table(cfg: OpenLoopConfig) -> np.ndarray:
     return TABLES[cfg.table] * signs
 
 
-def run(cfg: OpenLoopConfig, record_frames: bool = True, reset_seed: int | None = None,
-        noise: float = 0.0) -> dict:
+def run(
+    cfg: OpenLoopConfig,
+    record_frames: bool = True,
+    reset_seed: int | None = None,
+    noise: float = 0.0,
+) -> dict:
     """Roll out the table; returns the summary (and per-period records under ``"frames"``)."""
     table = torque_table(cfg)
     env = gym.make(

@@ -65,6 +65,7 @@ def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS):
 
 
 def search(cfg: OptimiseConfig, seed: int, show: bool):
+    """One cross-entropy search; returns ((score, candidate, steps), history)."""
     rng = np.random.default_rng(seed)
     mu = np.concatenate([rng.normal(0, 30, 20), np.asarray(NOMINAL_POSTURE_RAD)[1:]])
     sd = np.concatenate([np.full(20, cfg.torque_sd_nm), np.full(5, cfg.posture_sd_rad)])
@@ -88,10 +89,19 @@ def robustness(x: np.ndarray, seeds: int = 10) -> list[int]:
     """Completed steps through the env, strict default preset, over its reset-noise seeds."""
     from training.open_loop import OpenLoopConfig, run
 
-    cfg = OpenLoopConfig(preset="default", dt=0.002, max_periods=5000, gif=False, progress=False,
-                         torques=tuple(x[:20]), posture=(0.0, *x[20:25]))
-    return [run(cfg, record_frames=False, reset_seed=s, noise=0.01)["steps_completed"]
-            for s in range(seeds)]
+    cfg = OpenLoopConfig(
+        preset="default",
+        dt=0.002,
+        max_periods=5000,
+        gif=False,
+        progress=False,
+        torques=tuple(x[:20]),
+        posture=(0.0, *x[20:25]),
+    )
+    return [
+        run(cfg, record_frames=False, reset_seed=s, noise=0.01)["steps_completed"]
+        for s in range(seeds)
+    ]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -102,8 +112,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = []
     for r in range(cfg.restarts):
         best, history = search(cfg, cfg.seed + r, cfg.progress)
-        results.append({"seed": cfg.seed + r, "score": best[0], "steps": best[2],
-                        "x": best[1].round(4).tolist(), "history": history})
+        results.append(
+            {
+                "seed": cfg.seed + r,
+                "score": best[0],
+                "steps": best[2],
+                "x": best[1].round(4).tolist(),
+                "history": history,
+            }
+        )
         print(f"search {cfg.seed + r}: best score {best[0]:.2f}, {best[2]} steps", flush=True)
     top = max(results, key=lambda d: d["score"])
     x = np.array(top["x"])
@@ -118,8 +135,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"posture = {json.dumps([0.0] + [round(v, 5) for v in x[20:25]])}\n"
     )
     (rd / "best_open_loop.toml").write_text(toml)
-    (rd / "summary.json").write_text(json.dumps({"searches": results, "best": top,
-                                                 "robustness_steps_10_seeds": rob}, indent=1))
+    (rd / "summary.json").write_text(
+        json.dumps({"searches": results, "best": top, "robustness_steps_10_seeds": rob}, indent=1)
+    )
     print(toml)
     print(f"steps over 10 reset-noise seeds: {rob}")
     print(f"run directory: {rd}")

@@ -58,8 +58,13 @@ def rollout(params, q0, table, options, seconds):
         if res.terminated:
             end = res.termination.name.lower()
             break
-    return {"steps": st.steps_completed, "switches": switches, "events": events, "end": end,
-            "trace": trace}
+    return {
+        "steps": st.steps_completed,
+        "switches": switches,
+        "events": events,
+        "end": end,
+        "trace": trace,
+    }
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -68,20 +73,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     if cfg.summary:
         best = json.loads(Path(cfg.summary).read_text())["best_lenient"]
         name = best["option_set"]
-        cfg = dataclasses.replace(cfg, signs=tuple(best["signs"]),
-                                  posture=tuple(best["refined_posture"]),
-                                  friction_ratio=float(name.split("K=")[1]),
-                                  impact=name.split("/")[2])
+        cfg = dataclasses.replace(
+            cfg,
+            signs=tuple(best["signs"]),
+            posture=tuple(best["refined_posture"]),
+            friction_ratio=float(name.split("K=")[1]),
+            impact=name.split("/")[2],
+        )
     params = paper_biped(friction_ratio=cfg.friction_ratio)
     table = TABLES["table2"] * np.asarray(cfg.signs, float)
     reference = SimOptions(integrator="rk4", substeps=64, impact=cfg.impact, strict=False)
     runs = {
-        "paper numerics (Euler 20 ms, at the sample, FD J-dot), lenient":
-            rollout(params, cfg.posture, table, PAPER_OPTIONS.replace(impact=cfg.impact), cfg.seconds),
-        "reference (RK4 0.31 ms, located, exact J-dot), lenient":
-            rollout(params, cfg.posture, table, reference, cfg.seconds),
-        "reference, strict": rollout(params, cfg.posture, table, reference.replace(strict=True),
-                                     cfg.seconds),
+        "paper numerics (Euler 20 ms, at the sample, FD J-dot), lenient": rollout(
+            params, cfg.posture, table, PAPER_OPTIONS.replace(impact=cfg.impact), cfg.seconds
+        ),
+        "reference (RK4 0.31 ms, located, exact J-dot), lenient": rollout(
+            params, cfg.posture, table, reference, cfg.seconds
+        ),
+        "reference, strict": rollout(
+            params, cfg.posture, table, reference.replace(strict=True), cfg.seconds
+        ),
     }
     rd = make_run_dir(cfg.out_dir, "paper_numerics", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
     import matplotlib
@@ -92,7 +103,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     fig, ax = plt.subplots(figsize=(8, 3.5))
     for k, (label, r) in enumerate(runs.items()):
         t, m = zip(*r["trace"], strict=True)
-        ax.step(t, np.array(m) + 0.06 * k, where="post", label=f"{label}: {r['steps']} steps, {r['end']}")
+        ax.step(
+            t,
+            np.array(m) + 0.06 * k,
+            where="post",
+            label=f"{label}: {r['steps']} steps, {r['end']}",
+        )
     ax.set_xlabel("t [s]")
     ax.set_ylabel("cycle position (model + 4 x steps)")
     ax.set_title(f"Table 2, signs {cfg.signs}, K = {cfg.friction_ratio}, impact {cfg.impact}")

@@ -29,9 +29,13 @@ def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: st
     if vec == "batched":
         from gymnasium.vector import AutoresetMode
 
-        venv = gym.make_vec("ConstrainedBiped-v0", num_envs=n_envs,
-                            vectorization_mode="vector_entry_point",
-                            autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs)
+        venv = gym.make_vec(
+            "ConstrainedBiped-v0",
+            num_envs=n_envs,
+            vectorization_mode="vector_entry_point",
+            autoreset_mode=AutoresetMode.SAME_STEP,
+            **env_kwargs,
+        )
         out = BatchedSB3VecEnv(venv)
         out.seed(seed)
         return out
@@ -42,6 +46,7 @@ def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: st
             env = RescaleAction(gym.make("ConstrainedBiped-v0", **env_kwargs), lo, hi)
             env.reset(seed=seed + i)
             return env
+
         return thunk
 
     cls = SubprocVecEnv if vec == "subproc" else DummyVecEnv
@@ -50,8 +55,6 @@ def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: st
     out = cls([make(i) for i in range(n_envs)])
     out.seed(seed)
     return out
-
-
 
 
 class BatchedSB3VecEnv(_SB3VecEnv):
@@ -69,8 +72,9 @@ class BatchedSB3VecEnv(_SB3VecEnv):
 
         self.venv = venv
         self.limit = float(venv.single_action_space.high[0])
-        super().__init__(venv.num_envs, venv.single_observation_space,
-                         spaces.Box(-1.0, 1.0, (5,), np.float32))
+        super().__init__(
+            venv.num_envs, venv.single_observation_space, spaces.Box(-1.0, 1.0, (5,), np.float32)
+        )
         self._actions = None
 
     def reset(self):
@@ -90,14 +94,20 @@ class BatchedSB3VecEnv(_SB3VecEnv):
         dones = term | trunc
         infos = []
         for i in range(self.num_envs):
-            d = {"steps_completed": int(info["steps_completed"][i]), "hip_y": float(info["hip_y"][i]),
-                 "termination_reason": info["termination_reason"][i]}
+            d = {
+                "steps_completed": int(info["steps_completed"][i]),
+                "hip_y": float(info["hip_y"][i]),
+                "termination_reason": info["termination_reason"][i],
+            }
             if dones[i]:
                 d["terminal_observation"] = info["final_obs"][i].astype(np.float32)
                 d["TimeLimit.truncated"] = bool(trunc[i] and not term[i])
                 fi = info["final_info"][i]
-                d.update(steps_completed=int(fi["steps_completed"]), hip_y=float(fi["hip_y"]),
-                         termination_reason=fi["termination_reason"])
+                d.update(
+                    steps_completed=int(fi["steps_completed"]),
+                    hip_y=float(fi["hip_y"]),
+                    termination_reason=fi["termination_reason"],
+                )
             infos.append(d)
         return obs.astype(np.float32), rew.astype(np.float32), dones, infos
 
@@ -115,7 +125,9 @@ class BatchedSB3VecEnv(_SB3VecEnv):
 
     def env_method(self, method_name, *args, indices=None, **kwargs):
         """Call a method of the batch, once per requested index."""
-        return [getattr(self.venv, method_name)(*args, **kwargs) for _ in self._get_indices(indices)]
+        return [
+            getattr(self.venv, method_name)(*args, **kwargs) for _ in self._get_indices(indices)
+        ]
 
     def env_is_wrapped(self, wrapper_class, indices=None):
         """The batch has no per-env Gymnasium wrappers."""

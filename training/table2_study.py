@@ -103,12 +103,22 @@ def option_sets():
         for strict in (True, False):
             for impact in ("paper", "plastic"):
                 for K in (0.3, 0.5, 1.0):
-                    yield (f"{numerics}/{'strict' if strict else 'lenient'}/{impact}/K={K}",
-                           base.replace(strict=strict, impact=impact), K)
+                    yield (
+                        f"{numerics}/{'strict' if strict else 'lenient'}/{impact}/K={K}",
+                        base.replace(strict=strict, impact=impact),
+                        K,
+                    )
 
 
-def refine(sign_row: np.ndarray, q0: np.ndarray, options, K: float, seconds: float, iters: int,
-           rng: np.random.Generator):
+def refine(
+    sign_row: np.ndarray,
+    q0: np.ndarray,
+    options,
+    K: float,
+    seconds: float,
+    iters: int,
+    rng: np.random.Generator,
+):
     """Random search on the posture around q0 (batches of 64); returns (best q, best steps)."""
     import dataclasses
 
@@ -151,14 +161,26 @@ def main(argv: Sequence[str] | None = None) -> int:
             "readings_with_ge2_steps": int((steps >= 2).sum()),
             "readings_with_ge4_steps": int((steps >= 4).sum()),
             "max_steps": int(steps.max()),
-            "best": {"signs": SIGNS[sign_idx[k]].astype(int).tolist(),
-                     "posture": qs[k].round(6).tolist(), "steps": int(steps[k]),
-                     "end": ends and (EventCode(int(end[k])).name.lower() if end[k] >= 0 else "time_limit")},
+            "best": {
+                "signs": SIGNS[sign_idx[k]].astype(int).tolist(),
+                "posture": qs[k].round(6).tolist(),
+                "steps": int(steps[k]),
+                "end": ends
+                and (EventCode(int(end[k])).name.lower() if end[k] >= 0 else "time_limit"),
+            },
             "ends": dict(ends.most_common()),
         }
         for i in range(len(qs)):
-            rows.append((name, int(sign_idx[i]), int(post_idx[i]), int(steps[i]), float(root_y[i]),
-                         int(end[i])))
+            rows.append(
+                (
+                    name,
+                    int(sign_idx[i]),
+                    int(post_idx[i]),
+                    int(steps[i]),
+                    float(root_y[i]),
+                    int(end[i]),
+                )
+            )
     # refinement and sensitivity of the best strict and the best lenient reading
     for mode in ("strict", "lenient"):
         cands = [(v["max_steps"], n) for n, v in summary["option_sets"].items() if f"/{mode}/" in n]
@@ -166,16 +188,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         entry = summary["option_sets"][name]
         opts = next(o for n, o, _ in sets if n == name)
         K = next(k for n, _, k in sets if n == name)
-        q_ref, s_ref = refine(np.array(entry["best"]["signs"], float), np.array(entry["best"]["posture"]),
-                              opts, K, cfg.seconds, cfg.refine_iterations, rng)
-        noisy = q_ref + np.concatenate([np.zeros((100, 1)), rng.uniform(-0.01, 0.01, (100, 5))], axis=1)
+        q_ref, s_ref = refine(
+            np.array(entry["best"]["signs"], float),
+            np.array(entry["best"]["posture"]),
+            opts,
+            K,
+            cfg.seconds,
+            cfg.refine_iterations,
+            rng,
+        )
+        noisy = q_ref + np.concatenate(
+            [np.zeros((100, 1)), rng.uniform(-0.01, 0.01, (100, 5))], axis=1
+        )
         table = TABLES["table2"] * np.array(entry["best"]["signs"], float)
         params = dataclasses.replace(paper_biped(), friction_ratio=K)
         s_noisy, _, _ = run_batch(np.repeat(table[None], 100, 0), noisy, opts, cfg.seconds, params)
         summary[f"best_{mode}"] = {
-            "option_set": name, "signs": entry["best"]["signs"], "steps_before_refinement": steps_best,
-            "refined_posture": q_ref.round(6).tolist(), "refined_steps": s_ref,
-            "sensitivity_steps_under_0.01rad_noise": dict(sorted(Counter(s_noisy.tolist()).items())),
+            "option_set": name,
+            "signs": entry["best"]["signs"],
+            "steps_before_refinement": steps_best,
+            "refined_posture": q_ref.round(6).tolist(),
+            "refined_steps": s_ref,
+            "sensitivity_steps_under_0.01rad_noise": dict(
+                sorted(Counter(s_noisy.tolist()).items())
+            ),
         }
     with gzip.open(rd / "readings.csv.gz", "wt", newline="") as fh:
         w = csv.writer(fh)
@@ -187,8 +223,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"{'option set':<34} {'>=1':>5} {'>=2':>5} {'>=4':>5} {'max':>4}  most common end")
     for name, v in summary["option_sets"].items():
         top = next(iter(v["ends"].items()))
-        print(f"{name:<34} {v['readings_with_ge1_steps']:>5} {v['readings_with_ge2_steps']:>5} "
-              f"{v['readings_with_ge4_steps']:>5} {v['max_steps']:>4}  {top[0]} ({top[1]})")
+        print(
+            f"{name:<34} {v['readings_with_ge1_steps']:>5} {v['readings_with_ge2_steps']:>5} "
+            f"{v['readings_with_ge4_steps']:>5} {v['max_steps']:>4}  {top[0]} ({top[1]})"
+        )
     for mode in ("strict", "lenient"):
         print(f"best {mode}:", json.dumps(summary[f"best_{mode}"]))
     print(f"run directory: {rd}")
@@ -204,9 +242,17 @@ def _figures(summary: dict, rd: Path) -> None:
     names = list(summary["option_sets"])
     fig, ax = plt.subplots(figsize=(11, 4.5))
     x = np.arange(len(names))
-    for k, key in enumerate(("readings_with_ge1_steps", "readings_with_ge2_steps", "readings_with_ge4_steps")):
-        ax.bar(x + (k - 1) * 0.27, [summary["option_sets"][n][key] for n in names], 0.27,
-               label=key.replace("readings_with_", "").replace("_steps", " steps").replace("ge", ">= "))
+    for k, key in enumerate(
+        ("readings_with_ge1_steps", "readings_with_ge2_steps", "readings_with_ge4_steps")
+    ):
+        ax.bar(
+            x + (k - 1) * 0.27,
+            [summary["option_sets"][n][key] for n in names],
+            0.27,
+            label=key.replace("readings_with_", "")
+            .replace("_steps", " steps")
+            .replace("ge", ">= "),
+        )
     ax.set_xticks(x, names, rotation=75, fontsize=7)
     ax.set_ylabel(f"readings (of {summary['readings_per_option_set']})")
     ax.set_title("Table 2: readings that complete walking steps")

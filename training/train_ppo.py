@@ -62,14 +62,19 @@ class PPOConfig:
 
     def env_kwargs(self) -> dict:
         """Keyword arguments of ConstrainedBiped-v0."""
-        return {"reset_noise_scale": self.reset_noise_scale, "step_bonus": self.step_bonus,
-                "forward_reward_weight": self.forward_reward_weight,
-                "alive_bonus": self.alive_bonus, "switch_bonus": self.switch_bonus,
-                "ctrl_cost_weight": self.ctrl_cost_weight}
+        return {
+            "reset_noise_scale": self.reset_noise_scale,
+            "step_bonus": self.step_bonus,
+            "forward_reward_weight": self.forward_reward_weight,
+            "alive_bonus": self.alive_bonus,
+            "switch_bonus": self.switch_bonus,
+            "ctrl_cost_weight": self.ctrl_cost_weight,
+        }
 
 
-def evaluate_policy_episodes(model, vecnorm, cfg: PPOConfig, n: int, seed0: int,
-                             deterministic: bool = True, record=None) -> list[dict]:
+def evaluate_policy_episodes(
+    model, vecnorm, cfg: PPOConfig, n: int, seed0: int, deterministic: bool = True, record=None
+) -> list[dict]:
     """Run ``n`` seeded episodes of the single env; per episode: steps, distance, reason, return.
 
     ``record(env, episode_index)`` is called before every step if given (frames for figures).
@@ -92,9 +97,16 @@ def evaluate_policy_episodes(model, vecnorm, cfg: PPOConfig, n: int, seed0: int,
             obs, r, term, trunc, info = env.step(np.clip(action[0], -1, 1) * limit)
             ret += r
             done = term or trunc
-        out.append({"seed": seed0 + ep, "steps_completed": info["steps_completed"],
-                    "distance_m": info["hip_y"] - y0, "return": ret, "t_s": info["t"],
-                    "end": info["termination_reason"] or "time_limit"})
+        out.append(
+            {
+                "seed": seed0 + ep,
+                "steps_completed": info["steps_completed"],
+                "distance_m": info["hip_y"] - y0,
+                "return": ret,
+                "t_s": info["t"],
+                "end": info["termination_reason"] or "time_limit",
+            }
+        )
     env.close()
     return out
 
@@ -135,9 +147,15 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
             dist = np.array([e["distance_m"] for e in eps])
             ret = np.array([e["return"] for e in eps])
             reasons = Counter(e["end"] for e in eps)
-            row = {"env_steps": n, "wall_s": round(time.time() - self.t0, 1),
-                   "steps_mean": steps.mean(), "steps_min": steps.min(), "distance_mean_m": dist.mean(),
-                   "return_mean": ret.mean(), "reasons": json.dumps(dict(reasons))}
+            row = {
+                "env_steps": n,
+                "wall_s": round(time.time() - self.t0, 1),
+                "steps_mean": steps.mean(),
+                "steps_min": steps.min(),
+                "distance_mean_m": dist.mean(),
+                "return_mean": ret.mean(),
+                "reasons": json.dumps(dict(reasons)),
+            }
             new = not self.csv.exists()
             with open(self.csv, "a", newline="") as fh:
                 w = csv.DictWriter(fh, fieldnames=list(row))
@@ -150,8 +168,11 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
             if score > self.best:
                 self.best = score
                 self._save(run / "best")
-            print(f"[eval] {n} env steps: steps {steps.mean():.2f} (min {steps.min()}), "
-                  f"distance {dist.mean():.2f} m, ends {dict(reasons)}", flush=True)
+            print(
+                f"[eval] {n} env steps: steps {steps.mean():.2f} (min {steps.min()}), "
+                f"distance {dist.mean():.2f} m, ends {dict(reasons)}",
+                flush=True,
+            )
 
         def _on_training_end(self) -> None:
             self._save(run / "checkpoints")
@@ -173,17 +194,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     if cfg.resume:
         run = Path(cfg.resume)
         saved = parse_config(PPOConfig, ["--config", str(run / "config.toml")], "")
-        overrides = {f.name: getattr(cfg, f.name) for f in fields(cfg)
-                     if f.name in ("total_timesteps", "progress")}
-        cfg = PPOConfig(**{**{f.name: getattr(saved, f.name) for f in fields(saved)}, **overrides,
-                           "resume": str(run)})
+        overrides = {
+            f.name: getattr(cfg, f.name)
+            for f in fields(cfg)
+            if f.name in ("total_timesteps", "progress")
+        }
+        cfg = PPOConfig(
+            **{
+                **{f.name: getattr(saved, f.name) for f in fields(saved)},
+                **overrides,
+                "resume": str(run),
+            }
+        )
     else:
         run = make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
     venv = make_sb3_vec_env(cfg.n_envs, cfg.seed, cfg.env_kwargs(), cfg.vec)
-    venv = VecMonitor(venv, str(run / "monitor.csv"),
-                      info_keywords=("steps_completed", "hip_y", "termination_reason"))
+    venv = VecMonitor(
+        venv,
+        str(run / "monitor.csv"),
+        info_keywords=("steps_completed", "hip_y", "termination_reason"),
+    )
     if cfg.resume:
         vecnorm = VecNormalize.load(str(run / "checkpoints" / "vecnormalize.pkl"), venv)
         model = PPO.load(run / "checkpoints" / "model.zip", env=vecnorm, device="cpu")
@@ -191,22 +223,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         vecnorm = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
         model = PPO(
-            "MlpPolicy", vecnorm, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
-            n_epochs=cfg.n_epochs, learning_rate=cfg.learning_rate, gamma=cfg.gamma,
-            gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range, ent_coef=cfg.ent_coef,
+            "MlpPolicy",
+            vecnorm,
+            n_steps=cfg.n_steps,
+            batch_size=cfg.batch_size,
+            n_epochs=cfg.n_epochs,
+            learning_rate=cfg.learning_rate,
+            gamma=cfg.gamma,
+            gae_lambda=cfg.gae_lambda,
+            clip_range=cfg.clip_range,
+            ent_coef=cfg.ent_coef,
             policy_kwargs={"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init},
-            seed=cfg.seed, device="cpu", tensorboard_log=str(run / "tb"), verbose=0,
+            seed=cfg.seed,
+            device="cpu",
+            tensorboard_log=str(run / "tb"),
+            verbose=0,
         )
     remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
     t0 = time.time()
-    model.learn(total_timesteps=remaining, callback=_callbacks(cfg, run, vecnorm),
-                progress_bar=cfg.progress, reset_num_timesteps=not cfg.resume)
+    model.learn(
+        total_timesteps=remaining,
+        callback=_callbacks(cfg, run, vecnorm),
+        progress_bar=cfg.progress,
+        reset_num_timesteps=not cfg.resume,
+    )
     wall = time.time() - t0
     model.save(run / "model.zip")
     vecnorm.save(str(run / "vecnormalize.pkl"))
     with open(run / "training_time.txt", "a") as fh:
         fh.write(f"{model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
-    print(f"done: {model.num_timesteps} env steps in {wall:.0f} s; run directory: {run}", flush=True)
+    print(
+        f"done: {model.num_timesteps} env steps in {wall:.0f} s; run directory: {run}", flush=True
+    )
     venv.close()
     return 0
 
