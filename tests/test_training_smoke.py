@@ -67,15 +67,44 @@ def test_paper_preset_baseline_is_deterministic_and_documented():
 def test_train_ppo_and_evaluate_smoke(tmp_path):
     from training import evaluate, train_ppo
 
-    rc = train_ppo.main(["--out-dir", str(tmp_path), "--total-timesteps", "512", "--n-envs", "2",
-                         "--n-steps", "128", "--batch-size", "64", "--n-epochs", "1",
-                         "--eval-freq", "256", "--eval-episodes", "1", "--checkpoint-freq", "256",
-                         "--progress", "false"])
+    rc = train_ppo.main(
+        [
+            "--out-dir",
+            str(tmp_path),
+            "--total-timesteps",
+            "512",
+            "--n-envs",
+            "2",
+            "--n-steps",
+            "128",
+            "--batch-size",
+            "64",
+            "--n-epochs",
+            "1",
+            "--eval-freq",
+            "256",
+            "--eval-episodes",
+            "1",
+            "--checkpoint-freq",
+            "256",
+            "--progress",
+            "false",
+        ]
+    )
     assert rc == 0
     (run,) = (tmp_path / "train_ppo").iterdir()
-    for name in ("config.toml", "command.txt", "versions.json", "model.zip", "vecnormalize.pkl",
-                 "monitor.csv", "eval.csv", "checkpoints/model.zip", "checkpoints/vecnormalize.pkl",
-                 "best/model.zip"):
+    for name in (
+        "config.toml",
+        "command.txt",
+        "versions.json",
+        "model.zip",
+        "vecnormalize.pkl",
+        "monitor.csv",
+        "eval.csv",
+        "checkpoints/model.zip",
+        "checkpoints/vecnormalize.pkl",
+        "best/model.zip",
+    ):
         assert (run / name).exists(), name
     assert any((run / "tb").iterdir())
     # resume continues the step count from the checkpoint
@@ -92,8 +121,20 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
 def test_table2_study_smoke(tmp_path):
     from training import table2_study
 
-    rc = table2_study.main(["--out-dir", str(tmp_path), "--postures", "2", "--seconds", "0.2",
-                            "--refine-iterations", "1", "--progress", "false"])
+    rc = table2_study.main(
+        [
+            "--out-dir",
+            str(tmp_path),
+            "--postures",
+            "2",
+            "--seconds",
+            "0.2",
+            "--refine-iterations",
+            "1",
+            "--progress",
+            "false",
+        ]
+    )
     assert rc == 0
     (run,) = (tmp_path / "table2_study").iterdir()
     summary = json.loads((run / "summary.json").read_text())
