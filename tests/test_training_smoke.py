@@ -140,3 +140,28 @@ def test_table2_study_smoke(tmp_path):
     summary = json.loads((run / "summary.json").read_text())
     assert len(summary["option_sets"]) == 24 and "best_strict" in summary
     assert (run / "figures" / "end_reasons.png").is_file()
+
+
+def test_optimised_table_documented_step_counts():
+    """README: 1 step with exact torque switching, 0 through the env (2 ms lag), strict physics."""
+    import tomllib
+    from pathlib import Path
+
+    from biped_constraint_env import paper_biped
+    from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimState, step
+
+    path = Path(__file__).parents[1] / "training" / "configs" / "open_loop_optimised.toml"
+    cfg_dict = tomllib.loads(path.read_text())
+    table = np.array(cfg_dict["torques"]).reshape(4, 5)
+    st = SimState(0.0, 1, 0, np.array(cfg_dict["posture"]), np.zeros(6))
+    params = paper_biped()
+    for _ in range(500):
+        res = step(params, st, table, 0.02, DEFAULT_OPTIONS)
+        st = res.state
+        if res.terminated:
+            break
+    assert st.steps_completed == 1
+    cfg = open_loop.parse_config(open_loop.OpenLoopConfig, ["--config", str(path)], "x")
+    out = open_loop.run(cfg.__class__(**{**cfg.__dict__, "gif": False, "progress": False}),
+                        record_frames=False)
+    assert out["steps_completed"] == 0 and out["end_reason"] == "stance_foot_pulls"
