@@ -131,8 +131,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"# (search seed {top['seed']}, {top['steps']} steps from the exact posture;\n"
         f"# completed steps over 10 reset-noise seeds: {rob}).\n"
         'preset = "default"\ndt = 0.002\nmax_periods = 5000\n'
-        f"torques = {json.dumps([round(v, 3) for v in x[:20]])}\n"
-        f"posture = {json.dumps([0.0] + [round(v, 5) for v in x[20:25]])}\n"
+        f"torques = {json.dumps(x[:20].tolist())}\n"  # full precision: the steps are fragile
+        f"posture = {json.dumps([0.0] + x[20:25].tolist())}\n"
     )
     (rd / "best_open_loop.toml").write_text(toml)
     (rd / "summary.json").write_text(
