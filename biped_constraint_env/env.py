@@ -148,8 +148,11 @@ def validate_actions(actions: Any, limit: float, out_of_range: str) -> np.ndarra
     if a.dtype.kind not in "fiu":
         raise ValueError(f"action must be real numbers, got dtype {a.dtype}")
     a = a.astype(np.float64)
-    peak = np.abs(a).max()  # NaN propagates, so one reduction screens NaN, inf and range
-    if not peak <= limit:
+    if a.ndim == 1:  # a comparison with NaN is False, so this screens NaN, inf and range
+        inside = all(-limit <= x <= limit for x in a.tolist())
+    else:
+        inside = np.abs(a).max() <= limit  # NaN propagates through max
+    if not inside:
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action must be finite, got {a}")
         if out_of_range == "raise":
@@ -257,24 +260,30 @@ def cycle_position(mode: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return 4 * steps + (mode - 1)
 
 
-def reward_terms(progress_m: np.ndarray, dt: float, switches: np.ndarray, steps: np.ndarray,
-                 alive: np.ndarray, tau: np.ndarray, limit: float, w_forward: float,
-                 w_alive: float, w_switch: float, w_step: float,
-                 w_ctrl: float) -> tuple[np.ndarray, ...]:
-    """The reward terms of one control period for n envs, in REWARD_TERMS order (see Rewards).
+def reward_terms(progress_m, dt: float, switches, steps, alive, tau: np.ndarray, limit: float,
+                 w_forward: float, w_alive: float, w_switch: float, w_step: float,
+                 w_ctrl: float) -> tuple:
+    """The reward terms of one control period, in REWARD_TERMS order (see Rewards).
+
+    Works elementwise on one env (scalars, ``tau`` (5,)) or on n envs (arrays (n,), ``tau``
+    (n, 5)) with the same floating-point operations, so both environments agree bit for bit.
 
     Args:
-        progress_m: (n,) hip progress [m]. dt: control period [s]. switches: (n,) forward model
-            switches in the period. steps: (n,) walking steps completed in the period.
-            alive: (n,) whether the period did not end in a termination. tau: (n, 5) applied
-            torques [N m]. limit: torque bound [N m]. w_*: the weights.
+        progress_m: hip progress [m]. dt: control period [s]. switches: forward model switches
+            in the period. steps: walking steps completed in the period. alive: whether the
+            period did not end in a termination. tau: applied torques [N m]. limit: torque
+            bound [N m]. w_*: the weights.
     """
+    if tau.ndim == 1:  # one env: plain floats; sequential sum, as numpy's for 5 elements
+        tau_sq = sum(x * x for x in tau.tolist())
+    else:
+        tau_sq = np.sum(tau * tau, axis=-1)
     return (
         w_forward * progress_m / dt,
-        w_alive * alive.astype(np.float64),
-        w_switch * switches.astype(np.float64),
-        w_step * steps.astype(np.float64),
-        -w_ctrl * np.sum(tau * tau, axis=1) / (limit * limit),
+        w_alive * alive,
+        w_switch * switches,
+        w_step * steps,
+        -w_ctrl * tau_sq / (limit * limit),
     )
 
 
@@ -500,33 +509,34 @@ class ConstrainedBipedEnv(gym.Env):
     def step(self, action):
         """Apply the torques for one control period (see the class docstring)."""
         tau = validate_action(action, self.torque_limit_nm, self.out_of_range)
-        if self._sim.status[0] != 0:
+        sim = self._sim
+        if sim.status[0] != 0:
             raise RuntimeError("step() called after the episode ended; call reset()")
-        hip_y0 = self._hip[0, 0]
-        steps0 = self._sim.ist[0, 2]
-        pos0 = cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2])
+        mode0, _, steps0, _ = sim.ist[0].tolist()
+        hip_y0 = self._hip[0, 0].item()
         self._tau_table[0] = tau
-        advance(self.params, self._sim, self._tau_table, self.dt, self.options)
+        advance(self.params, sim, self._tau_table, self.dt, self.options)
         self._observe()
-        status = self._sim.status[0]
-        events = self._sim.events_of(0)
+        status = sim.status[0].item()
+        events = sim.events_of(0) if sim.n_events[0] else ()
         reason = None
         if status == STATUS_TERMINATED:
             reason = next(e.code.name.lower() for e in events if e.terminal)
         elif status == STATUS_NONFINITE:
             reason = TERMINATION_NON_FINITE
+        mode1, _, steps1, _ = sim.ist[0].tolist()
         parts = reward_terms(
-            self._hip[:, 0] - hip_y0,
+            self._hip[0, 0].item() - hip_y0,
             self.dt,
-            cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2]) - pos0,
-            self._sim.ist[:, 2] - steps0,
-            np.array([reason is None]),
-            tau[None, :],
+            cycle_position(mode1, steps1) - cycle_position(mode0, steps0),
+            steps1 - steps0,
+            reason is None,
+            tau,
             self.torque_limit_nm,
             *self.weights,
         )
-        terms = {k: float(v[0]) for k, v in zip(REWARD_TERMS, parts, strict=True)}
-        reward = float(sum(parts)[0])
+        terms = dict(zip(REWARD_TERMS, parts, strict=True))
+        reward = sum(parts)
         info = self._info(events, terms, reason)
         if self.render_mode == "human":
             self.render()
@@ -540,13 +550,13 @@ class ConstrainedBipedEnv(gym.Env):
         )
 
     def _info(self, events, terms, reason) -> dict[str, Any]:
-        s = self._sim
+        mode, side, steps, _ = self._sim.ist[0].tolist()
         return {
-            "mode": int(s.ist[0, 0]),
-            "stance_side": int(s.ist[0, 1]),
-            "steps_completed": int(s.ist[0, 2]),
-            "t": float(s.fst[0, 0]),
-            "hip_y": float(self._hip[0, 0]),
+            "mode": mode,
+            "stance_side": side,
+            "steps_completed": steps,
+            "t": self._sim.fst[0, 0].item(),
+            "hip_y": self._hip[0, 0].item(),
             "switches": tuple(
                 (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
             ),

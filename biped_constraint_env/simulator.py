@@ -988,7 +988,7 @@ def advance(
         arrays.status,
         arrays.n_events,
     )
-    if arrays.n >= PARALLEL_MIN_BATCH and numba.get_num_threads() > 1:
+    if arrays.n >= PARALLEL_MIN_BATCH and numba.get_num_threads() > 1:  # (n checked first: cheap)
         nb_advance_batch_parallel(*args, numba.get_num_threads())
     else:
         nb_advance_batch(*args)
