@@ -125,6 +125,12 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
             self.t0 = time.time()
             self.csv = run / "eval.csv"
 
+        def _on_training_start(self) -> None:
+            # on resume, count from the restored step count, not from zero
+            n = self.model.num_timesteps
+            self.next_eval = (n // cfg.eval_freq + 1) * cfg.eval_freq
+            self.next_ckpt = (n // cfg.checkpoint_freq + 1) * cfg.checkpoint_freq
+
         def _on_step(self) -> bool:
             n = self.model.num_timesteps
             if n >= self.next_ckpt:
