@@ -89,3 +89,43 @@ def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
     frames[0].save(
         path, save_all=True, append_images=frames[1:], duration=max(int(1000 / fps), 20), loop=0
     )
+
+
+def learning_curve(run: Path, path: Path) -> None:
+    """Completed walking steps and return against env steps, from monitor.csv and eval.csv."""
+    import csv
+
+    plt = _mpl()
+    files = sorted(run.glob("monitor*.csv"),
+                   key=lambda f: 0 if f.name == "monitor.csv" else int(f.name.split(".")[1]))
+    mon, x = [], []
+    for f in files:  # monitor.csv, then monitor.<start step>.csv of each resumed session
+        rows = list(csv.reader(open(f)))[2:]
+        start = 0 if f.name == "monitor.csv" else int(f.name.split(".")[1])
+        x.extend(start + np.cumsum([int(r[1]) for r in rows]))
+        mon.extend(rows)
+    x = np.array(x)
+    rets = np.array([float(r[0]) for r in mon])
+    steps = np.array([int(r[3]) for r in mon])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    window = max(len(mon) // 200, 1)
+
+    def smooth(y):
+        return np.convolve(y, np.ones(window) / window, mode="valid")
+
+    axes[0].plot(x[window - 1:], smooth(steps), lw=1, label="training episodes (moving mean)")
+    axes[1].plot(x[window - 1:], smooth(rets), lw=1, label="training episodes (moving mean)")
+    if (run / "eval.csv").exists():
+        ev = list(csv.DictReader(open(run / "eval.csv")))
+        ex = [int(r["env_steps"]) for r in ev]
+        axes[0].plot(ex, [float(r["steps_mean"]) for r in ev], "o-", label="evaluation (10 seeds)")
+        axes[1].plot(ex, [float(r["return_mean"]) for r in ev], "o-", label="evaluation (10 seeds)")
+    axes[0].set_ylabel("completed walking steps per episode")
+    axes[1].set_ylabel("return")
+    for ax in axes:
+        ax.set_xlabel("env steps")
+        ax.legend(fontsize=8)
+        ax.grid(lw=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

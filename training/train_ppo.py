@@ -214,13 +214,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     else:
         run = make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
+    (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
     venv = make_sb3_vec_env(cfg.n_envs, cfg.seed, cfg.env_kwargs(), cfg.vec)
+    start = 0
+    if cfg.resume:
+        start = int((run / "checkpoints" / "num_timesteps.txt").read_text())
+    # a resumed session writes its own monitor file, named by the step count it starts from
+    monitor = run / ("monitor.csv" if start == 0 else f"monitor.{start}.csv")
     venv = VecMonitor(
-        venv,
-        str(run / "monitor.csv"),
-        info_keywords=("steps_completed", "hip_y", "termination_reason"),
+        venv, str(monitor), info_keywords=("steps_completed", "hip_y", "termination_reason")
     )
     if cfg.resume:
         vecnorm = VecNormalize.load(str(run / "checkpoints" / "vecnormalize.pkl"), venv)
