@@ -10,9 +10,11 @@ posture at rest, integrated without guards. Reference: RK4 at h = 0.01 ms.
 Scene (b): the hybrid simulator through model 2 -> 3 -> 4 (heel strike with impact, foot flat
 with impact and chain renumbering) from a hand-built model-2 state, zero torque, 0.3 s.
 A strict walking step has not been found yet (README, Reproducing Table 2), so this partial
-cycle stands in for "one full step". Reference: RK4 with 400 substeps per 20 ms, located
-events. Errors are measured on the absolute angles of the six physical links (invariant to
-the renumbering), on the switch times, and on the point-contact residual.
+cycle is the cleanest two-impact scene. Scene (c): the optimised open-loop table
+(training/configs/open_loop_optimised.toml), a complete cycle 1 -> 2 -> 3 -> 4 -> 1 (and the next
+1 -> 2) in 2.04 s. Reference (b, c): RK4 with 400 substeps per 20 ms, located events.
+Errors are measured on the absolute angles of the six physical links (invariant to the
+renumbering), on the switch times, and on the point-contact residual.
 Cost: wall time per simulated second (best of 3, compiled loop) and constrained-dynamics
 evaluations per simulated second (counted in the solver).
 """
@@ -71,15 +73,15 @@ def integrate_free(ch, sc, mode, q0, qd0, tau6, h, n, every, iopt, fopt, a, b):
 
 
 @njit(cache=True)
-def run_hybrid(chs, scs, q0, qd0, mode0, dt, n, iopt, fopt, a, b):
-    """n control periods of the hybrid simulator; returns link angles, events, residual, evals."""
+def run_hybrid(chs, scs, q0, qd0, mode0, dt, n, iopt, fopt, a, b, tau):
+    """n control periods of the hybrid simulator under the per-model torque table ``tau``
+    (4, 5); returns link angles, events, residual, evals."""
     W = nb_make_work()
     S = nb_make_scratch()
     q = q0.copy()
     qd = qd0.copy()
     ist = np.array([mode0, 0, 0, 0])
     fst = np.zeros(2)
-    tau = np.zeros((4, 5))
     ev = np.zeros((MAX_EVENTS, 5))
     forces = np.zeros(5)
     phys = np.full((n + 1, 6), np.nan)
@@ -240,56 +242,54 @@ def scene_b_start(params):
     return q
 
 
-def scene_b(params, quick):
+def scene_hybrid(params, quick, label, q0, tau, T):
+    """Work-precision of the hybrid simulator from model ``q0`` (mode 1 or 2 inferred)."""
     chs, scs = params.packed
-    q0 = scene_b_start(params)
-    T = 0.3
+    mode0, q0 = q0
     n = int(round(T / 0.02))
     ref_opts = SimOptions(integrator="rk4", substeps=400, strict=False)
-    phys_ref, ev_ref, res_ref, _ = run_hybrid(
-        chs, scs, q0, np.zeros(6), 2, 0.02, n, *ref_opts.packed
-    )
+    phys_ref, ev_ref, res_ref, _ = run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n,
+                                              *ref_opts.packed, tau)
     sw_ref = ev_ref[ev_ref[:, 1] == 0]
     rows = []
-    variants = []
-    for method in METHODS:
-        variants.append((method, True, "exact"))
-    variants += [
-        ("rk2", False, "exact"),
-        ("euler", False, "finite_difference"),
-        ("rk2", True, "finite_difference"),
-    ]
+    variants = [(method, True, "exact") for method in METHODS]
+    variants += [("rk2", False, "exact"), ("euler", False, "finite_difference"),
+                 ("rk2", True, "finite_difference")]
     for method, locate, jdot in variants:
         for sub in SUBSTEPS if not quick else SUBSTEPS[:6]:
-            opts = SimOptions(
-                integrator=method, substeps=sub, strict=False, locate_events=locate, jdot=jdot
-            )
+            opts = SimOptions(integrator=method, substeps=sub, strict=False, locate_events=locate,
+                              jdot=jdot)
             packed = opts.packed
-            phys, ev, resid, evals = run_hybrid(chs, scs, q0, np.zeros(6), 2, 0.02, n, *packed)
+            phys, ev, resid, evals = run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed,
+                                                tau)
             sw = ev[ev[:, 1] == 0]
             same = len(sw) >= len(sw_ref) and np.all(sw[: len(sw_ref), 2:] == sw_ref[:, 2:])
             rows_ref = np.isfinite(phys_ref).all(axis=1)
             ok = bool(same and np.isfinite(phys[rows_ref]).all())
             err = float(np.abs(_wrap(phys[rows_ref] - phys_ref[rows_ref])).max()) if ok else np.inf
             t_err = float(np.abs(sw[: len(sw_ref), 0] - sw_ref[:, 0]).max()) if ok else np.inf
-            wall = best_time(lambda: run_hybrid(chs, scs, q0, np.zeros(6), 2, 0.02, n, *packed))
-            rows.append(
-                {
-                    "scene": "b",
-                    "method": method,
-                    "locate_events": locate,
-                    "jdot": jdot,
-                    "h_ms": 20.0 / sub,
-                    "substeps_per_20ms": sub,
-                    "same_switches": ok,
-                    "max_angle_err_rad": err,
-                    "switch_time_err_s": t_err,
-                    "contact_residual_m": float(resid),
-                    "us_per_sim_s": wall / T * 1e6,
-                    "evals_per_sim_s": evals / T,
-                }
-            )
+            wall = best_time(lambda: run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed,
+                                                tau))
+            rows.append({"scene": label, "method": method, "locate_events": locate, "jdot": jdot,
+                         "h_ms": 20.0 / sub, "substeps_per_20ms": sub, "same_switches": ok,
+                         "max_angle_err_rad": err, "switch_time_err_s": t_err,
+                         "contact_residual_m": float(resid),
+                         "us_per_sim_s": wall / T * 1e6, "evals_per_sim_s": evals / T})
     return rows, [(float(t), int(a), int(b)) for t, _, a, b in sw_ref], float(res_ref)
+
+
+def scene_b(params, quick):
+    return scene_hybrid(params, quick, "b", (2, scene_b_start(params)), np.zeros((4, 5)), 0.3)
+
+
+def scene_c(params, quick):
+    """The optimised open-loop table: a complete cycle 1 -> 2 -> 3 -> 4 -> 1 (then 1 -> 2)."""
+    import tomllib
+
+    cfg = tomllib.loads((Path(__file__).parents[1] / "training" / "configs"
+                         / "open_loop_optimised.toml").read_text())
+    tau = np.array(cfg["torques"]).reshape(4, 5)
+    return scene_hybrid(params, quick, "c", (1, np.array(cfg["posture"])), tau, 2.04)
 
 
 def stability_map(params, quick):
@@ -384,7 +384,7 @@ def mujoco_validation(params):
     }
 
 
-def plot(rows_a, rows_b, stab, path_a, path_b, path_s):
+def plot(rows_a, rows_b, rows_c, stab, path_a, path_b, path_c, path_s):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -479,7 +479,7 @@ def main(argv=None) -> int:
     from training.common import progress
 
     results = {}
-    for name in progress(["a", "b", "stability", "mujoco"], 4, "accuracy study"):
+    for name in progress(["a", "b", "c", "stability", "mujoco"], 5, "accuracy study"):
         if name == "a":
             results["scene_a"], results["scene_a_reference_self_error_rad"] = scene_a(
                 params, args.quick
@@ -488,6 +488,10 @@ def main(argv=None) -> int:
             rows, sw, res = scene_b(params, args.quick)
             results["scene_b"], results["scene_b_reference_switches"] = rows, sw
             results["scene_b_reference_residual_m"] = res
+        elif name == "c":
+            rows, sw, res = scene_c(params, args.quick)
+            results["scene_c"], results["scene_c_reference_switches"] = rows, sw
+            results["scene_c_reference_residual_m"] = res
         elif name == "stability":
             results["stability"] = stability_map(params, args.quick)
         else:
@@ -538,6 +542,7 @@ def main(argv=None) -> int:
     (args.out / "accuracy_tables.md").write_text(md)
     print(md)
     print("scene (b) reference switches:", results["scene_b_reference_switches"])
+    print("scene (c) reference switches:", results["scene_c_reference_switches"])
     print("reference self-error (a), h vs 2h:", results["scene_a_reference_self_error_rad"])
     print("MuJoCo:", json.dumps(results["mujoco"], indent=1))
     return 0

@@ -365,7 +365,7 @@ class ConstrainedBipedEnv(gym.Env):
     ``stance_toe_pulls``, ``stance_foot_pulls`` (force events end the episode only with
     ``strict=True``), ``step_behind_stance_toe``, ``zeno``, and ``non_finite`` (the
     numerical state blew up; the observation is the last finite state). A fall is one of
-    these (a knee, the hip or an ankle below the ground).
+    these (a knee or the hip below the ground).
     ### Truncation
     By the time limit only: ``max_episode_steps=1000`` control periods at registration.
 

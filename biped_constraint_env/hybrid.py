@@ -322,7 +322,10 @@ def nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd_h, W, forces, g):
         g[G_HEEL_DOWN] = heel5_z + tol
         g[G_FOOT_PULLS] = min(forces[FC_HEEL], forces[FC_TOE])
     zmin = INF
-    for k in range(2, 6):  # knee, hip, knee, swing ankle (the stance ankle: heel-down guard)
+    # knees and hip; an ankle is the midpoint of its foot's sole, so it can only go below the
+    # floor through a foot end, which the foot guards catch. (Checking the swing ankle made a
+    # flat landing, phi5 = 0 with the ankle exactly at z = 0, race the 3 -> 4 switch.)
+    for k in range(2, 5):
         zmin = min(zmin, K[k, K_OZ])
     g[G_BELOW_GROUND] = zmin + tol
     return piv

@@ -112,7 +112,8 @@ class EventCode(IntEnum):
     SWING_FOOT_TOUCHDOWN = 4
     """Model 1: the swing foot (heel or toe) touches the ground."""
     BODY_BELOW_GROUND = 5
-    """A knee, the hip or an ankle below the ground."""
+    """A knee or the hip below the ground (an ankle, the midpoint of its foot's sole, can only
+    go below through a foot end, which the foot guards report)."""
     SWING_HEEL_PULLS = 6
     """Model 3: the heel contact would have to pull (f_n < 0)."""
     STANCE_TOE_PULLS = 7

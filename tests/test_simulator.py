@@ -190,7 +190,7 @@ def test_event_swing_foot_touchdown_in_model1(params):
 
 
 def test_event_body_below_ground(params):
-    q = np.array([0.0, -1.4, 1.4, 0.0, 0.0, 0.0])  # deep squat: swing ankle below the floor
+    q = np.array([0.0, -1.7, 1.7, 0.0, 0.0, 0.0])  # stance shank past horizontal: knees below
     res = _term(params, SimState(0.0, 1, 0, q, np.zeros(6)), np.zeros(5))
     assert res.termination == EventCode.BODY_BELOW_GROUND
 
@@ -323,3 +323,16 @@ def test_table2_run_with_located_events_follows_mode_order(params):
     for e in switches:
         assert e.mode_to == e.mode_from % 4 + 1
     assert all(b.t >= a.t for a, b in zip(switches, switches[1:], strict=False))
+
+
+def test_flat_landing_is_a_switch_not_an_ankle_below_ground(params):
+    """At 3 -> 4 the swing ankle reaches z = 0 with the flat foot; that must not end the run."""
+    st = model3_state(params.chain(0), phi5=0.02)
+    seen = []
+    for _ in range(30):
+        res = step(params, st, np.zeros(5), DT, DEFAULT_OPTIONS.replace(strict=False))
+        seen += [e.code for e in res.events]
+        st = res.state
+        if (3, 4) in [(e.mode_from, e.mode_to) for e in res.events] or res.terminated:
+            break
+    assert EventCode.MODE_SWITCH in seen and EventCode.BODY_BELOW_GROUND not in seen[:1]
