@@ -45,6 +45,8 @@ from biped_constraint_env.simulator import (
 )
 
 RESULTS = Path(__file__).parent / "results"
+HYBRID_COLS = ["method", "locate_events", "jdot", "h_ms", "max_angle_err_rad",
+               "switch_time_err_s", "contact_residual_m", "us_per_sim_s", "evals_per_sim_s"]
 POSTURE = np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])
 TABLE2_ROW1 = np.array([10.0, 120.0, 35.0, 80.0, 0.0])
 SUBSTEPS = (1, 2, 4, 8, 16, 32, 64, 128, 256, 400)  # per 20 ms: h = 20 ms ... 0.05 ms
@@ -499,9 +501,11 @@ def main(argv=None) -> int:
     plot(
         results["scene_a"],
         results["scene_b"],
+        results["scene_c"],
         results["stability"],
         args.out / "work_precision_a.png",
         args.out / "work_precision_b.png",
+        args.out / "work_precision_c.png",
         args.out / "stability_map.png",
     )
     (args.out / "accuracy.json").write_text(json.dumps(results, indent=1) + "\n")
@@ -533,6 +537,8 @@ def main(argv=None) -> int:
                 "evals_per_sim_s",
             ],
         )
+        + "\n## scene (c)\n"
+        + _md(results["scene_c"], HYBRID_COLS)
         + "\n## stability\n"
         + _md(
             results["stability"],

@@ -117,7 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "seed": cfg.seed + r,
                 "score": best[0],
                 "steps": best[2],
-                "x": best[1].round(4).tolist(),
+                "x": best[1].tolist(),
                 "history": history,
             }
         )
