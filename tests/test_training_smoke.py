@@ -164,4 +164,4 @@ def test_optimised_table_documented_step_counts():
     cfg = open_loop.parse_config(open_loop.OpenLoopConfig, ["--config", str(path)], "x")
     out = open_loop.run(cfg.__class__(**{**cfg.__dict__, "gif": False, "progress": False}),
                         record_frames=False)
-    assert out["steps_completed"] == 0 and out["end_reason"] == "stance_foot_pulls"
+    assert out["steps_completed"] == 0 and out["end_reason"] == "stance_toe_pulls"
