@@ -23,6 +23,7 @@ from biped_constraint_env.kinematics import point_bias_acceleration, point_jacob
 from biped_constraint_env.model import paper_biped
 from biped_constraint_env.simulator import (
     DEFAULT_OPTIONS,
+    FAST_OPTIONS,
     MAX_EVENTS,
     SimState,
     nb_advance,
@@ -119,9 +120,14 @@ def main(argv=None) -> int:
     q0 = np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])
     ev = np.zeros((MAX_EVENTS, 5))
     forces = np.zeros(5)
-    opts = DEFAULT_OPTIONS.replace(strict=False)
-    iopt, fopt, a, b = opts.packed
     print()
+    for opts in (DEFAULT_OPTIONS.replace(strict=False), FAST_OPTIONS.replace(strict=False)):
+        _control_steps(params, opts, chs, scs, q0, ev, forces, args)
+    return 0
+
+
+def _control_steps(params, opts, chs, scs, q0, ev, forces, args):
+    iopt, fopt, a, b = opts.packed
     state0 = SimState(0.0, 1, 0, q0, np.zeros(6))
     for label, torque in (
         ("no event", np.zeros(5)),
@@ -165,7 +171,7 @@ def main(argv=None) -> int:
         batch()
         t_b = _timeit(batch, 20) / n_b
         print(
-            f"default 20 ms control step ({opts.integrator} x {opts.substeps}, {label}): "
+            f"20 ms control step ({opts.integrator} x {opts.substeps}, {label}): "
             f"simulator.step {t_api:.1f} us | compiled call {t_c:.1f} us | "
             f"batched, per simulator {t_b:.1f} us"
         )

@@ -12,6 +12,7 @@ from .model import BipedParams, ChainModel, LinkParams, chain_for, paper_biped
 from .modes import MODE_TABLE, EventCode, Mode
 from .simulator import (
     DEFAULT_OPTIONS,
+    FAST_OPTIONS,
     PAPER_OPTIONS,
     Event,
     SimOptions,
@@ -24,17 +25,20 @@ from .simulator import (
 
 __version__ = "0.1.0"
 
-ENV_ID = "ConstrainedBiped-v0"
+ENV_ID = "ConstrainedBiped-v1"
+"""The current version: the accuracy study's default integrator (RK4 x 16 per 20 ms)."""
 MAX_EPISODE_STEPS = 1000
-"""Time limit of ConstrainedBiped-v0 in control periods (1000 x 20 ms = 20 s)."""
+"""Time limit in control periods (1000 x 20 ms = 20 s)."""
 
-if ENV_ID not in gymnasium.registry:
-    gymnasium.register(
-        id=ENV_ID,
-        entry_point="biped_constraint_env.env:ConstrainedBipedEnv",
-        vector_entry_point="biped_constraint_env.vector_env:ConstrainedBipedVectorEnv",
-        max_episode_steps=MAX_EPISODE_STEPS,
-    )
+for _id, _kwargs in (("ConstrainedBiped-v0", {"preset": "fast"}), (ENV_ID, {})):
+    if _id not in gymnasium.registry:
+        gymnasium.register(
+            id=_id,
+            entry_point="biped_constraint_env.env:ConstrainedBipedEnv",
+            vector_entry_point="biped_constraint_env.vector_env:ConstrainedBipedVectorEnv",
+            max_episode_steps=MAX_EPISODE_STEPS,
+            kwargs=_kwargs,
+        )
 
 __all__ = [
     "BipedParams",
@@ -42,6 +46,7 @@ __all__ = [
     "DEFAULT_OPTIONS",
     "ENV_ID",
     "Event",
+    "FAST_OPTIONS",
     "EventCode",
     "LinkParams",
     "MODE_TABLE",

@@ -1,4 +1,4 @@
-"""ConstrainedBiped-v0: API conformance, determinism, bad input, info consistency, rendering."""
+"""ConstrainedBiped-v1: API conformance, determinism, bad input, info consistency, rendering."""
 
 import pickle
 import warnings
@@ -12,7 +12,7 @@ import biped_constraint_env  # noqa: F401
 from biped_constraint_env.env import OBS_NAMES, REWARD_TERMS, ConstrainedBipedEnv
 from biped_constraint_env.modes import Mode
 
-ENV_ID = "ConstrainedBiped-v0"
+ENV_ID = "ConstrainedBiped-v1"
 SMALL = 8.0  # [N m] random torques small enough that episodes last tens of steps
 
 
@@ -146,7 +146,7 @@ def test_reset_options_and_impossible_state():
 
 def test_bad_constructor_arguments():
     with pytest.raises(ValueError, match="preset"):
-        ConstrainedBipedEnv(preset="fast")
+        ConstrainedBipedEnv(preset="turbo")
     with pytest.raises(ValueError, match="dt"):
         ConstrainedBipedEnv(dt=-0.01)
     with pytest.raises(ValueError, match="torque_limit_nm"):

@@ -44,7 +44,7 @@ def test_sb3_ppo_learns_2048_steps(tmp_path):
 
     torch.set_num_threads(1)
     lo, hi = np.full(5, -1.0, np.float32), np.full(5, 1.0, np.float32)
-    env = RescaleAction(gym.make("ConstrainedBiped-v0"), lo, hi)
+    env = RescaleAction(gym.make("ConstrainedBiped-v1"), lo, hi)
     model = PPO("MlpPolicy", env, n_steps=512, batch_size=128, n_epochs=2, seed=0, device="cpu")
     model.learn(total_timesteps=2048)
     assert model.num_timesteps >= 2048

@@ -6,7 +6,7 @@ import pytest
 
 import biped_constraint_env  # noqa: F401
 
-ENV_ID = "ConstrainedBiped-v0"
+ENV_ID = "ConstrainedBiped-v1"
 
 
 def _run(mode, n_envs, steps, seed=3):

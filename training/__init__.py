@@ -1,1 +1,1 @@
-"""Experiments on ConstrainedBiped-v0: the open-loop baseline and PPO scripts."""
+"""Experiments on ConstrainedBiped-v1: the open-loop baseline and PPO scripts."""

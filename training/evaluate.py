@@ -2,7 +2,7 @@
 
     python -m training.evaluate RUN_DIR [--episodes 10] [--seed 0] [--which final|best]
 
-Runs N seeded episodes of ConstrainedBiped-v0 with its reset noise and the deterministic
+Runs N seeded episodes of ConstrainedBiped-v1 with its reset noise and the deterministic
 policy; prints mean, std and min of completed walking steps and distance, the termination
 reasons, and a table that puts the policy next to the open-loop baselines; writes
 ``evaluation.json``, ``figures/best.gif``, ``figures/worst.gif`` and Fig. 6-style strips of the

@@ -43,7 +43,7 @@ GIF_MAX_FRAMES = 400
 class OpenLoopConfig:
     """Settings of one open-loop run (defaults: the paper's reading, Table 2)."""
 
-    env_id: str = "ConstrainedBiped-v0"
+    env_id: str = "ConstrainedBiped-v1"
     preset: str = "paper"  # "paper" (the paper's numerics) or "default"
     table: str = "table2"  # a key of TABLES
     torques: tuple[float, ...] = ()  # 20 values [N m] (models 1-4 x joints 1-5): replaces `table`

@@ -107,7 +107,7 @@ def robustness(x: np.ndarray, seeds: int = 10) -> list[int]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the searches and write the best table."""
     cfg = parse_config(OptimiseConfig, argv, __doc__.splitlines()[0])
-    rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v1", cfg.seed, cfg, argv)
     print(f"run directory: {rd}")
     results = []
     for r in range(cfg.restarts):

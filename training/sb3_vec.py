@@ -1,4 +1,4 @@
-"""Stable-Baselines3 vectorised environments for ConstrainedBiped-v0.
+"""Stable-Baselines3 vectorised environments for ConstrainedBiped-v1.
 
 :func:`make_sb3_vec_env` builds the batched vector env behind :class:`BatchedSB3VecEnv` (one
 compiled call steps every simulator), or SB3's own SubprocVecEnv / DummyVecEnv of single envs.
@@ -13,8 +13,9 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv as _SB3VecEnv
 
 
-def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: str = "batched"):
-    """An SB3 VecEnv of ConstrainedBiped-v0 with actions in [-1, 1] (rescaled to N m).
+def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: str = "batched",
+                     env_id: str = "ConstrainedBiped-v1"):
+    """An SB3 VecEnv of ConstrainedBiped-v1 with actions in [-1, 1] (rescaled to N m).
 
     ``vec="batched"``: the batched vector env (all simulators in one compiled call) behind
     :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
@@ -30,7 +31,7 @@ def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: st
         from gymnasium.vector import AutoresetMode
 
         venv = gym.make_vec(
-            "ConstrainedBiped-v0",
+            env_id,
             num_envs=n_envs,
             vectorization_mode="vector_entry_point",
             autoreset_mode=AutoresetMode.SAME_STEP,
@@ -43,7 +44,7 @@ def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: st
     def make(i):
         def thunk():
             lo, hi = np.full(5, -1.0, np.float32), np.full(5, 1.0, np.float32)
-            env = RescaleAction(gym.make("ConstrainedBiped-v0", **env_kwargs), lo, hi)
+            env = RescaleAction(gym.make(env_id, **env_kwargs), lo, hi)
             env.reset(seed=seed + i)
             return env
 

@@ -1,4 +1,4 @@
-"""Stable-Baselines3 PPO on ConstrainedBiped-v0.
+"""Stable-Baselines3 PPO on ConstrainedBiped-v1.
 
     python -m training.train_ppo [--config training/configs/ppo_default.toml] [--flag value ...]
     python -m training.train_ppo --resume runs/train_ppo/<run>   # continue from its checkpoint
@@ -30,7 +30,8 @@ from training.common import make_run_dir, parse_config
 class PPOConfig:
     """PPO settings (numbers that differ from SB3's defaults say why)."""
 
-    env_id: str = "ConstrainedBiped-v0"
+    env_id: str = "ConstrainedBiped-v1"
+    preset: str = "fast"  # RK2 x 4: ~6x cheaper than the default RK4 x 16; evaluation uses the same
     seed: int = 0
     total_timesteps: int = 3_000_000
     n_envs: int = 16  # one compiled batch: env stepping stays cheap next to the policy
@@ -61,7 +62,7 @@ class PPOConfig:
     progress: bool = True
 
     def env_kwargs(self) -> dict:
-        """Keyword arguments of ConstrainedBiped-v0."""
+        """Keyword arguments of ConstrainedBiped-v1."""
         return {
             "reset_noise_scale": self.reset_noise_scale,
             "step_bonus": self.step_bonus,
@@ -217,7 +218,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
-    venv = make_sb3_vec_env(cfg.n_envs, cfg.seed, cfg.env_kwargs(), cfg.vec)
+    venv = make_sb3_vec_env(cfg.n_envs, cfg.seed, cfg.env_kwargs(), cfg.vec, cfg.env_id)
     start = 0
     if cfg.resume:
         start = int((run / "checkpoints" / "num_timesteps.txt").read_text())
