@@ -122,7 +122,7 @@ class ChainModel:
         [rad], damping of joint i [N m s/rad].
         """
         a = np.zeros((N_LINKS, N_COLS))
-        foot0, foot5 = self.links[0], self.links[5]
+        foot0 = self.links[0]
         angle = (0.0, HALF_PI_RAD, 0.0, PI_RAD, 0.0, HALF_PI_RAD)
         for i, link in enumerate(self.links):
             a[i, COL_MASS] = link.mass_kg
@@ -137,7 +137,6 @@ class ChainModel:
         # Swing foot: the ankle (joint 5) is the foot's midpoint and centre of mass.
         a[5, COL_COM] = 0.0
         a[5, COL_NEXT] = 0.0
-        del foot5
         a.flags.writeable = False
         return a
 

@@ -831,11 +831,6 @@ def rollout(
     return states, events, None
 
 
-def swing_heel_offset(params: BipedParams, stance_side: int) -> float:
-    """Offset of the swing heel from the swing ankle along the swing foot [m]."""
-    return float(params.chain(stance_side).packed_scalars[SC_HEEL5])
-
-
 def integrate_mode(
     params: BipedParams,
     state: SimState,
