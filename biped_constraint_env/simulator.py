@@ -53,7 +53,7 @@ from .hybrid import (
 )
 from .integrators import EVALS_PER_STEP, Integrator, parse_integrator, tableau
 from .kinematics import KEYPOINT_NAMES, nb_keypoints
-from .model import N_ACTUATED, N_LINKS, SC_HEEL5, BipedParams
+from .model import N_ACTUATED, N_LINKS, BipedParams
 from .modes import FORCE_EVENTS, MODE_TABLE, N_GUARDS, EventCode, Mode, packed_mode_table
 
 MAX_EVENTS = 16
