@@ -76,6 +76,7 @@ OBS_NAMES: tuple[str, ...] = (
 )
 """Observation entries, in order (see the env docstring's table)."""
 TERMINATION_NON_FINITE = "non_finite"
+TERMINATION_FALL = "fall"
 
 PRESETS: dict[str, SimOptions] = {
     "default": DEFAULT_OPTIONS,
@@ -261,14 +262,32 @@ REWARD_TERMS = ("reward_forward", "reward_alive", "reward_switch", "reward_step"
 """Names of the reward terms in ``info`` (their sum is the reward)."""
 
 
+def fallen(hip_z, threshold_m: float | None):
+    """Whether the hip is below ``threshold_m`` [m] (never when the threshold is None)."""
+    if threshold_m is None:
+        return hip_z < -np.inf
+    return hip_z < threshold_m
+
+
 def cycle_position(mode: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """4 * steps + (mode - 1): increases by one at every forward model switch."""
     return 4 * steps + (mode - 1)
 
 
-def reward_terms(progress_m, dt: float, switches, steps, alive, tau: np.ndarray, limit: float,
-                 w_forward: float, w_alive: float, w_switch: float, w_step: float,
-                 w_ctrl: float) -> tuple:
+def reward_terms(
+    progress_m,
+    dt: float,
+    switches,
+    steps,
+    alive,
+    tau: np.ndarray,
+    limit: float,
+    w_forward: float,
+    w_alive: float,
+    w_switch: float,
+    w_step: float,
+    w_ctrl: float,
+) -> tuple:
     """The reward terms of one control period, in REWARD_TERMS order (see Rewards).
 
     Works elementwise on one env (scalars, ``tau`` (5,)) or on n envs (arrays (n,), ``tau``
@@ -369,8 +388,10 @@ class ConstrainedBipedEnv(gym.Env):
     ``stance_foot_tips_back``, ``stance_heel_down``, ``swing_toe_strike``,
     ``swing_foot_touchdown``, ``body_below_ground``, ``swing_heel_pulls``,
     ``stance_toe_pulls``, ``stance_foot_pulls`` (force events end the episode only with
-    ``strict=True``), ``step_behind_stance_toe``, ``zeno``, and ``non_finite`` (the
-    numerical state blew up; the observation is the last finite state). A fall is one of
+    ``strict=True``), ``step_behind_stance_toe``, ``zeno``, ``non_finite`` (the
+    numerical state blew up; the observation is the last finite state), and, only if
+    ``fall_hip_height_m`` is set, ``fall`` (the hip below that height [m] at the end of a
+    period; off by default). A fall is one of
     these (a knee or the hip below the ground).
     ### Truncation
     By the time limit only: ``max_episode_steps=1000`` control periods at registration.
@@ -391,6 +412,7 @@ class ConstrainedBipedEnv(gym.Env):
     | step_bonus | float | 5.0 | per completed walking step | reward |
     | ctrl_cost_weight | float | 0.1 | per unit of sum((tau/limit)^2) | reward |
     | reset_noise_scale | float | 0.01 | uniform noise on q1..q5 [rad] | start |
+    | fall_hip_height_m | float or None | None | end the episode when the hip is below [m] | end |
     | posture | array (6,) | NOMINAL_POSTURE_RAD | nominal start posture [rad] | start |
     | render_mode | str | None | "rgb_array" or "human" | render |
 
@@ -430,6 +452,7 @@ class ConstrainedBipedEnv(gym.Env):
         step_bonus: float = 5.0,
         ctrl_cost_weight: float = 0.1,
         reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
+        fall_hip_height_m: float | None = None,
         posture=NOMINAL_POSTURE_RAD,
         render_mode: str | None = None,
     ):
@@ -471,9 +494,21 @@ class ConstrainedBipedEnv(gym.Env):
         check_start_state(self.params, SimState(0.0, 1, 0, self.posture, np.zeros(N_LINKS)))
         self.torque_limit_nm = float(torque_limit_nm)
         self.out_of_range = out_of_range
-        self.weights = (float(forward_reward_weight), float(alive_bonus), float(switch_bonus),
-                        float(step_bonus), float(ctrl_cost_weight))
+        self.weights = (
+            float(forward_reward_weight),
+            float(alive_bonus),
+            float(switch_bonus),
+            float(step_bonus),
+            float(ctrl_cost_weight),
+        )
         self.reset_noise_scale = float(reset_noise_scale)
+        if fall_hip_height_m is not None and not (
+            isinstance(fall_hip_height_m, (int, float)) and np.isfinite(fall_hip_height_m)
+        ):
+            raise ValueError(
+                f"fall_hip_height_m must be a finite number or None, got {fall_hip_height_m!r}"
+            )
+        self.fall_hip_height_m = None if fall_hip_height_m is None else float(fall_hip_height_m)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
         self.action_space = spaces.Box(
@@ -532,6 +567,8 @@ class ConstrainedBipedEnv(gym.Env):
             reason = next(e.code.name.lower() for e in events if e.terminal)
         elif status == STATUS_NONFINITE:
             reason = TERMINATION_NON_FINITE
+        elif fallen(self._hip[0, 1].item(), self.fall_hip_height_m):
+            reason = TERMINATION_FALL
         mode1, _, steps1, _ = sim.ist[0].tolist()
         parts = reward_terms(
             self._hip[0, 0].item() - hip_y0,

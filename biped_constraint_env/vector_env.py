@@ -22,10 +22,12 @@ from .env import (
     OBS_HIGH,
     OBS_LOW,
     REWARD_TERMS,
+    TERMINATION_FALL,
     TERMINATION_NON_FINITE,
     ConstrainedBipedEnv,
     check_start_state,
     cycle_position,
+    fallen,
     nb_observe,
     reward_terms,
     sample_initial_q,
@@ -113,6 +115,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         else:
             self._reset_slots(np.arange(self.num_envs))
         self._autoreset[:] = False
+        self._fell = np.zeros(self.num_envs, bool)
         self._observe()
         return self._obs.copy(), self._infos(np.zeros(self.num_envs), None)
 
@@ -138,7 +141,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._sim.n_events[resetting] = 0
         self._observe()
         status = self._sim.status
-        terminated = (status == STATUS_TERMINATED) | (status == STATUS_NONFINITE)
+        fell = fallen(self._hip[:, 1], p.fall_hip_height_m) & (status == 0)
+        terminated = (status == STATUS_TERMINATED) | (status == STATUS_NONFINITE) | fell
+        self._fell = fell
         parts = reward_terms(
             self._hip[:, 0] - hip0, self.dt,
             cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2]) - pos0,
@@ -180,6 +185,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def _infos(self, zeros: np.ndarray, terms) -> dict[str, Any]:
         s = self._sim
         reasons = np.full(self.num_envs, None, dtype=object)
+        reasons[getattr(self, "_fell", np.zeros(self.num_envs, bool))] = TERMINATION_FALL
         for i in np.flatnonzero(s.status > 0):
             if s.status[i] == STATUS_NONFINITE:
                 reasons[i] = TERMINATION_NON_FINITE

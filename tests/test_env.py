@@ -226,3 +226,15 @@ def test_switch_and_alive_terms():
     env.reset(seed=0)
     _, _, te, _, info = env.step(np.array([-150.0, 0, 0, 0, 0]))
     assert te and info["reward_alive"] == 0.0
+
+
+def test_fall_termination_optional():
+    env = ConstrainedBipedEnv(fall_hip_height_m=2.99)  # zero torque: hip below in ~9 periods
+    env.reset(seed=0)
+    for _ in range(100):
+        _, _, te, _, info = env.step(np.zeros(5))
+        if te:
+            break
+    assert te and info["termination_reason"] == "fall"
+    with pytest.raises(ValueError, match="fall_hip_height_m"):
+        ConstrainedBipedEnv(fall_hip_height_m=np.nan)

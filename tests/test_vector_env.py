@@ -82,3 +82,23 @@ def test_same_step_autoreset_matches_next_step():
         assert np.array_equal(i2["final_obs"][i], o1[i])
     o1_reset, r_reset, *_ = nxt.step(a)  # NEXT_STEP resets the finished ones now
     assert np.array_equal(o1_reset[done], o2[done]) and np.all(r_reset[done] == 0.0)
+
+
+def test_fall_termination_same_in_batched_and_single():
+    kw = dict(num_envs=3, fall_hip_height_m=2.7)
+    ob, rb, tb = _run_kw("vector_entry_point", kw)
+    os_, rs, ts = _run_kw("sync", kw)
+    assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
+
+
+def _run_kw(mode, kw, steps=60, seed=3):
+    ve = gym.make_vec(ENV_ID, vectorization_mode=mode, **kw)
+    obs, _ = ve.reset(seed=seed)
+    rng = np.random.default_rng(0)
+    obs_seq, R, T = [obs], [], []
+    for _ in range(steps):
+        obs, r, te, tr, info = ve.step(rng.uniform(-8, 8, (kw["num_envs"], 5)).astype(np.float32))
+        obs_seq.append(obs)
+        R.append(r)
+        T.append(te | tr)
+    return np.array(obs_seq), np.array(R), np.array(T)

@@ -52,6 +52,7 @@ class PPOConfig:
     eval_episodes: int = 10
     checkpoint_freq: int = 250_000  # env steps between checkpoints
     reset_noise_scale: float = 0.01  # the env's default
+    fall_hip_height_m: float = 0.0  # > 0: end episodes when the hip is below it [m] (0 = off)
     forward_reward_weight: float = 1.0  # the env's defaults
     alive_bonus: float = 0.5
     switch_bonus: float = 1.0
