@@ -104,6 +104,7 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
         "checkpoints/model.zip",
         "checkpoints/vecnormalize.pkl",
         "best/model.zip",
+        "figures/learning_curve.png",
     ):
         assert (run / name).exists(), name
     assert any((run / "tb").iterdir())

@@ -100,7 +100,8 @@ def learning_curve(run: Path, path: Path) -> None:
                    key=lambda f: 0 if f.name == "monitor.csv" else int(f.name.split(".")[1]))
     mon, x = [], []
     for f in files:  # monitor.csv, then monitor.<start step>.csv of each resumed session
-        rows = list(csv.reader(open(f)))[2:]
+        with open(f) as fh:
+            rows = list(csv.reader(fh))[2:]
         start = 0 if f.name == "monitor.csv" else int(f.name.split(".")[1])
         x.extend(start + np.cumsum([int(r[1]) for r in rows]))
         mon.extend(rows)
@@ -116,7 +117,8 @@ def learning_curve(run: Path, path: Path) -> None:
     axes[0].plot(x[window - 1:], smooth(steps), lw=1, label="training episodes (moving mean)")
     axes[1].plot(x[window - 1:], smooth(rets), lw=1, label="training episodes (moving mean)")
     if (run / "eval.csv").exists():
-        ev = list(csv.DictReader(open(run / "eval.csv")))
+        with open(run / "eval.csv") as fh:
+            ev = list(csv.DictReader(fh))
         ex = [int(r["env_steps"]) for r in ev]
         axes[0].plot(ex, [float(r["steps_mean"]) for r in ev], "o-", label="evaluation (10 seeds)")
         axes[1].plot(ex, [float(r["return_mean"]) for r in ev], "o-", label="evaluation (10 seeds)")

@@ -264,6 +264,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     vecnorm.save(str(run / "vecnormalize.pkl"))
     with open(run / "training_time.txt", "a") as fh:
         fh.write(f"{model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
+    from training.plots import learning_curve
+
+    learning_curve(run, run / "figures" / "learning_curve.png")
     print(
         f"done: {model.num_timesteps} env steps in {wall:.0f} s; run directory: {run}", flush=True
     )
