@@ -45,8 +45,17 @@ from biped_constraint_env.simulator import (
 )
 
 RESULTS = Path(__file__).parent / "results"
-HYBRID_COLS = ["method", "locate_events", "jdot", "h_ms", "max_angle_err_rad",
-               "switch_time_err_s", "contact_residual_m", "us_per_sim_s", "evals_per_sim_s"]
+HYBRID_COLS = [
+    "method",
+    "locate_events",
+    "jdot",
+    "h_ms",
+    "max_angle_err_rad",
+    "switch_time_err_s",
+    "contact_residual_m",
+    "us_per_sim_s",
+    "evals_per_sim_s",
+]
 POSTURE = np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])
 TABLE2_ROW1 = np.array([10.0, 120.0, 35.0, 80.0, 0.0])
 SUBSTEPS = (1, 2, 4, 8, 16, 32, 64, 128, 256, 400)  # per 20 ms: h = 20 ms ... 0.05 ms
@@ -250,33 +259,51 @@ def scene_hybrid(params, quick, label, q0, tau, T):
     mode0, q0 = q0
     n = int(round(T / 0.02))
     ref_opts = SimOptions(integrator="rk4", substeps=400, strict=False)
-    phys_ref, ev_ref, res_ref, _ = run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n,
-                                              *ref_opts.packed, tau)
+    phys_ref, ev_ref, res_ref, _ = run_hybrid(
+        chs, scs, q0, np.zeros(6), mode0, 0.02, n, *ref_opts.packed, tau
+    )
     sw_ref = ev_ref[ev_ref[:, 1] == 0]
     rows = []
     variants = [(method, True, "exact") for method in METHODS]
-    variants += [("rk2", False, "exact"), ("euler", False, "finite_difference"),
-                 ("rk2", True, "finite_difference")]
+    variants += [
+        ("rk2", False, "exact"),
+        ("euler", False, "finite_difference"),
+        ("rk2", True, "finite_difference"),
+    ]
     for method, locate, jdot in variants:
         for sub in SUBSTEPS if not quick else SUBSTEPS[:6]:
-            opts = SimOptions(integrator=method, substeps=sub, strict=False, locate_events=locate,
-                              jdot=jdot)
+            opts = SimOptions(
+                integrator=method, substeps=sub, strict=False, locate_events=locate, jdot=jdot
+            )
             packed = opts.packed
-            phys, ev, resid, evals = run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed,
-                                                tau)
+            phys, ev, resid, evals = run_hybrid(
+                chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed, tau
+            )
             sw = ev[ev[:, 1] == 0]
             same = len(sw) >= len(sw_ref) and np.all(sw[: len(sw_ref), 2:] == sw_ref[:, 2:])
             rows_ref = np.isfinite(phys_ref).all(axis=1)
             ok = bool(same and np.isfinite(phys[rows_ref]).all())
             err = float(np.abs(_wrap(phys[rows_ref] - phys_ref[rows_ref])).max()) if ok else np.inf
             t_err = float(np.abs(sw[: len(sw_ref), 0] - sw_ref[:, 0]).max()) if ok else np.inf
-            wall = best_time(lambda: run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed,
-                                                tau))
-            rows.append({"scene": label, "method": method, "locate_events": locate, "jdot": jdot,
-                         "h_ms": 20.0 / sub, "substeps_per_20ms": sub, "same_switches": ok,
-                         "max_angle_err_rad": err, "switch_time_err_s": t_err,
-                         "contact_residual_m": float(resid),
-                         "us_per_sim_s": wall / T * 1e6, "evals_per_sim_s": evals / T})
+            wall = best_time(
+                lambda: run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed, tau)
+            )
+            rows.append(
+                {
+                    "scene": label,
+                    "method": method,
+                    "locate_events": locate,
+                    "jdot": jdot,
+                    "h_ms": 20.0 / sub,
+                    "substeps_per_20ms": sub,
+                    "same_switches": ok,
+                    "max_angle_err_rad": err,
+                    "switch_time_err_s": t_err,
+                    "contact_residual_m": float(resid),
+                    "us_per_sim_s": wall / T * 1e6,
+                    "evals_per_sim_s": evals / T,
+                }
+            )
     return rows, [(float(t), int(a), int(b)) for t, _, a, b in sw_ref], float(res_ref)
 
 
@@ -288,8 +315,11 @@ def scene_c(params, quick):
     """The optimised open-loop table: a complete cycle 1 -> 2 -> 3 -> 4 -> 1 (then 1 -> 2)."""
     import tomllib
 
-    cfg = tomllib.loads((Path(__file__).parents[1] / "training" / "configs"
-                         / "open_loop_optimised.toml").read_text())
+    cfg = tomllib.loads(
+        (
+            Path(__file__).parents[1] / "training" / "configs" / "open_loop_optimised.toml"
+        ).read_text()
+    )
     tau = np.array(cfg["torques"]).reshape(4, 5)
     return scene_hybrid(params, quick, "c", (1, np.array(cfg["posture"])), tau, 2.04)
 
@@ -523,20 +553,7 @@ def main(argv=None) -> int:
             ],
         )
         + "\n## scene (b)\n"
-        + _md(
-            results["scene_b"],
-            [
-                "method",
-                "locate_events",
-                "jdot",
-                "h_ms",
-                "max_angle_err_rad",
-                "switch_time_err_s",
-                "contact_residual_m",
-                "us_per_sim_s",
-                "evals_per_sim_s",
-            ],
-        )
+        + _md(results["scene_b"], HYBRID_COLS)
         + "\n## scene (c)\n"
         + _md(results["scene_c"], HYBRID_COLS)
         + "\n## stability\n"

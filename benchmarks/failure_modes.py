@@ -53,12 +53,18 @@ def model3_q(theta0=-0.15, stance_knee=0.05, phi5=0.2):
     return q_of(phi)
 
 
-def schur(params, q, qd):
+def _contact_terms(params, q, qd):
+    """(M, heel Jacobian J (2, 6), regularised slip sign s) of the model-3 heel contact."""
     ch = params.chain(0)
     M = dyn.mass_matrix(ch, q)
     J = kin.point_jacobian(ch, q, 5, HEEL)
     v = J[0] @ qd
-    s = v / np.sqrt(v * v + 1e-6)
+    return M, J, v / np.sqrt(v * v + 1e-6)
+
+
+def schur(params, q, qd):
+    """(J_c M^-1 J_f^T, J_c M^-1 J_c^T, s J_c M^-1 J_t^T) of the model-3 heel contact."""
+    M, J, s = _contact_terms(params, q, qd)
     jf = J[1] - params.friction_ratio * s * J[0]
     return (
         float(J[1] @ np.linalg.solve(M, jf)),
@@ -69,11 +75,7 @@ def schur(params, q, qd):
 
 def inv_cond_kkt(params, q, qd):
     """1 / cond of the model-3 KKT matrix [[M, -J_f^T], [J_c, 0]] (numpy, for the figure)."""
-    ch = params.chain(0)
-    M = dyn.mass_matrix(ch, q)
-    J = kin.point_jacobian(ch, q, 5, HEEL)
-    v = J[0] @ qd
-    s = v / np.sqrt(v * v + 1e-6)
+    M, J, s = _contact_terms(params, q, qd)
     A = np.zeros((7, 7))
     A[:6, :6] = M
     A[:6, 6] = -(J[1] - params.friction_ratio * s * J[0])
