@@ -188,7 +188,7 @@ def scene_a(params, quick):
         for sub in SUBSTEPS if not quick else SUBSTEPS[:6]:
             h = 0.02 / sub
             n = int(round(T / h))
-            out, evals = integrate_free(
+            args = (
                 ch.packed,
                 ch.packed_scalars,
                 1,
@@ -203,25 +203,10 @@ def scene_a(params, quick):
                 a,
                 b,
             )
+            out, evals = integrate_free(*args)
             stable = bool(np.all(np.isfinite(out)))
             err = float(np.abs(_wrap(out - ref)).max()) if stable else np.inf
-            wall = best_time(
-                lambda: integrate_free(
-                    ch.packed,
-                    ch.packed_scalars,
-                    1,
-                    POSTURE,
-                    np.zeros(6),
-                    tau6,
-                    h,
-                    n,
-                    sub,
-                    iopt,
-                    fopt,
-                    a,
-                    b,
-                )
-            )
+            wall = best_time(lambda: integrate_free(*args))  # noqa: B023 (called right here)
             rows.append(
                 {
                     "scene": "a",
