@@ -163,6 +163,7 @@ def test_optimised_table_documented_step_counts():
             break
     assert st.steps_completed == 1
     cfg = open_loop.parse_config(open_loop.OpenLoopConfig, ["--config", str(path)], "x")
-    out = open_loop.run(cfg.__class__(**{**cfg.__dict__, "gif": False, "progress": False}),
-                        record_frames=False)
+    out = open_loop.run(
+        cfg.__class__(**{**cfg.__dict__, "gif": False, "progress": False}), record_frames=False
+    )
     assert out["steps_completed"] == 0 and out["end_reason"] == "stance_toe_pulls"

@@ -96,8 +96,10 @@ def learning_curve(run: Path, path: Path) -> None:
     import csv
 
     plt = _mpl()
-    files = sorted(run.glob("monitor*.csv"),
-                   key=lambda f: 0 if f.name == "monitor.csv" else int(f.name.split(".")[1]))
+    files = sorted(
+        run.glob("monitor*.csv"),
+        key=lambda f: 0 if f.name == "monitor.csv" else int(f.name.split(".")[1]),
+    )
     mon, x = [], []
     for f in files:  # monitor.csv, then monitor.<start step>.csv of each resumed session
         with open(f) as fh:
@@ -114,8 +116,8 @@ def learning_curve(run: Path, path: Path) -> None:
     def smooth(y):
         return np.convolve(y, np.ones(window) / window, mode="valid")
 
-    axes[0].plot(x[window - 1:], smooth(steps), lw=1, label="training episodes (moving mean)")
-    axes[1].plot(x[window - 1:], smooth(rets), lw=1, label="training episodes (moving mean)")
+    axes[0].plot(x[window - 1 :], smooth(steps), lw=1, label="training episodes (moving mean)")
+    axes[1].plot(x[window - 1 :], smooth(rets), lw=1, label="training episodes (moving mean)")
     if (run / "eval.csv").exists():
         with open(run / "eval.csv") as fh:
             ev = list(csv.DictReader(fh))

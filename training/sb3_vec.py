@@ -9,24 +9,33 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv as _SB3VecEnv
 
 
-def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: str = "batched",
-                     env_id: str = "ConstrainedBiped-v1"):
+def make_sb3_vec_env(
+    n_envs: int,
+    seed: int,
+    env_kwargs: dict[str, Any],
+    vec: str = "batched",
+    env_id: str = "ConstrainedBiped-v1",
+    action_map=None,
+):
     """An SB3 VecEnv of ConstrainedBiped-v1 with actions in [-1, 1] (rescaled to N m).
 
     ``vec="batched"``: the batched vector env (all simulators in one compiled call) behind
     :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
-    ``"dummy"``: DummyVecEnv (one process).
+    ``"dummy"``: DummyVecEnv (one process). ``action_map``: a
+    :class:`training.fsm_controller.ActionMap` (default: plain rescaling by the torque limit).
     """
-    import gymnasium as gym
-    from gymnasium.wrappers import RescaleAction
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import biped_constraint_env  # noqa: F401
+    from training.fsm_controller import ActionMap
 
+    limit = float(env_kwargs.get("torque_limit_nm", 150.0))
+    action_map = action_map or ActionMap(limit)
     if vec == "batched":
         from gymnasium.vector import AutoresetMode
 
@@ -37,14 +46,13 @@ def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: st
             autoreset_mode=AutoresetMode.SAME_STEP,
             **env_kwargs,
         )
-        out = BatchedSB3VecEnv(venv)
+        out = BatchedSB3VecEnv(venv, action_map)
         out.seed(seed)
         return out
 
     def make(i):
         def thunk():
-            lo, hi = np.full(5, -1.0, np.float32), np.full(5, 1.0, np.float32)
-            env = RescaleAction(gym.make(env_id, **env_kwargs), lo, hi)
+            env = MappedAction(gym.make(env_id, **env_kwargs), action_map)
             env.reset(seed=seed + i)
             return env
 
@@ -58,21 +66,50 @@ def make_sb3_vec_env(n_envs: int, seed: int, env_kwargs: dict[str, Any], vec: st
     return out
 
 
+class MappedAction(gym.Wrapper):
+    """A single env whose actions in [-1, 1] go through an ActionMap (which sees the raw obs)."""
+
+    def __init__(self, env, action_map):
+        """Wrap ``env``; ``action_map`` maps (actions, observations) to torques."""
+        super().__init__(env)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (5,), np.float32)
+        self.action_map = action_map
+        self._obs = None
+
+    def reset(self, **kwargs):
+        """Reset and keep the observation for the next action."""
+        obs, info = self.env.reset(**kwargs)
+        self._obs = obs
+        return obs, info
+
+    def step(self, action):
+        """Map the action to torques and step."""
+        tau = self.action_map(np.asarray(action)[None, :], self._obs[None, :])[0]
+        obs, r, term, trunc, info = self.env.step(tau)
+        self._obs = obs
+        return obs, r, term, trunc, info
+
+
 class BatchedSB3VecEnv(_SB3VecEnv):
     """Stable-Baselines3 VecEnv over the batched ConstrainedBiped vector env (SAME_STEP resets).
 
-    Actions arrive in [-1, 1] and are scaled to N m by the torque limit; a finished episode's
+    Actions arrive in [-1, 1] and become N m through ``action_map`` (default: scaled by the
+    torque limit; or a residual on :mod:`training.fsm_controller`); a finished episode's
     last observation is ``infos[i]["terminal_observation"]`` and a time-limit end sets
     ``infos[i]["TimeLimit.truncated"]``, as SB3 expects. Each info also carries the env's
     ``steps_completed``, ``hip_y`` and ``termination_reason``.
     """
 
-    def __init__(self, venv):
+    def __init__(self, venv, action_map=None):
         """Wrap ``venv`` (a ConstrainedBipedVectorEnv in SAME_STEP autoreset mode)."""
         from gymnasium import spaces
 
+        from training.fsm_controller import ActionMap
+
         self.venv = venv
         self.limit = float(venv.single_action_space.high[0])
+        self.action_map = action_map or ActionMap(self.limit)
+        self._obs = None
         super().__init__(
             venv.num_envs, venv.single_observation_space, spaces.Box(-1.0, 1.0, (5,), np.float32)
         )
@@ -82,16 +119,18 @@ class BatchedSB3VecEnv(_SB3VecEnv):
         """Reset all sub-environments (seeded by ``seed()`` if it was called)."""
         seed = self._seeds[0]
         obs, _ = self.venv.reset(seed=seed)
+        self._obs = obs
         self._reset_seeds()
         return obs.astype(np.float32)
 
     def step_async(self, actions):
         """Store the actions for step_wait."""
-        self._actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0) * self.limit
+        self._actions = self.action_map(actions, self._obs)
 
     def step_wait(self):
         """Step the batch; returns (obs, rewards, dones, infos)."""
         obs, rew, term, trunc, info = self.venv.step(self._actions)
+        self._obs = obs  # SAME_STEP: already the next episode's first observation where done
         dones = term | trunc
         infos = []
         for i in range(self.num_envs):

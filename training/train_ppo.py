@@ -58,6 +58,8 @@ class PPOConfig:
     switch_bonus: float = 1.0
     step_bonus: float = 5.0
     ctrl_cost_weight: float = 0.1
+    base_controller: str = ""  # a training.fsm_controller JSON: learn a residual on it ("" = none)
+    residual_scale: float = 1.0  # residual bound as a fraction of the torque limit (with a base)
     out_dir: Path = Path("runs")
     resume: str = ""  # a run directory to continue
     progress: bool = True
@@ -65,13 +67,22 @@ class PPOConfig:
     def env_kwargs(self) -> dict:
         """Keyword arguments of ConstrainedBiped-v1."""
         return {
+            "preset": self.preset,
             "reset_noise_scale": self.reset_noise_scale,
             "step_bonus": self.step_bonus,
             "forward_reward_weight": self.forward_reward_weight,
             "alive_bonus": self.alive_bonus,
             "switch_bonus": self.switch_bonus,
             "ctrl_cost_weight": self.ctrl_cost_weight,
+            **({"fall_hip_height_m": self.fall_hip_height_m} if self.fall_hip_height_m > 0 else {}),
         }
+
+    def action_map(self):
+        """Policy action -> torque (plain rescaling, or a residual on the base controller)."""
+        from biped_constraint_env.env import TORQUE_LIMIT_NM
+        from training.fsm_controller import action_map_from
+
+        return action_map_from(self.base_controller, self.residual_scale, TORQUE_LIMIT_NM)
 
 
 def evaluate_policy_episodes(
@@ -86,7 +97,7 @@ def evaluate_policy_episodes(
     import biped_constraint_env  # noqa: F401
 
     env = gym.make(cfg.env_id, **cfg.env_kwargs(), render_mode="rgb_array" if record else None)
-    limit = env.unwrapped.torque_limit_nm
+    amap = cfg.action_map()
     out = []
     for ep in range(n):
         obs, info = env.reset(seed=seed0 + ep)
@@ -96,7 +107,7 @@ def evaluate_policy_episodes(
                 record(env, ep)
             o = vecnorm.normalize_obs(obs[None, :].astype(np.float32)) if vecnorm else obs[None, :]
             action, _ = model.predict(o, deterministic=deterministic)
-            obs, r, term, trunc, info = env.step(np.clip(action[0], -1, 1) * limit)
+            obs, r, term, trunc, info = env.step(amap(action, obs[None, :])[0])
             ret += r
             done = term or trunc
         out.append(
@@ -219,7 +230,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
-    venv = make_sb3_vec_env(cfg.n_envs, cfg.seed, cfg.env_kwargs(), cfg.vec, cfg.env_id)
+    venv = make_sb3_vec_env(
+        cfg.n_envs, cfg.seed, cfg.env_kwargs(), cfg.vec, cfg.env_id, cfg.action_map()
+    )
     start = 0
     if cfg.resume:
         start = int((run / "checkpoints" / "num_timesteps.txt").read_text())
