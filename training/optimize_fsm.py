@@ -26,24 +26,13 @@ import numpy as np
 from training.common import make_run_dir, parse_config, progress
 from training.fsm_controller import N_PARAMS, PARAM_NAMES, load, save, torques
 
+_M = range(1, 5)
 INITIAL_GUESS: dict[str, float] = {
-    **dict(
-        zip(
-            ("hip_target_m1", "hip_target_m2", "hip_target_m3", "hip_target_m4"),
-            (0.4, 0.5, 0.3, -0.3),
-            strict=True,
-        )
-    ),
-    **{f"knee_behind_m{i}": -1.0 for i in range(1, 5)},
-    **dict(
-        zip(
-            ("foot_behind_m1", "foot_behind_m2", "foot_behind_m3", "foot_behind_m4"),
-            (0.0, 0.15, 0.0, 0.0),
-            strict=True,
-        )
-    ),
-    **{f"stance_knee_m{i}": 0.05 for i in range(1, 5)},
-    **{f"ankle_ff_m{i}": 0.0 for i in range(1, 5)},
+    **dict(zip((f"hip_target_m{i}" for i in _M), (0.4, 0.5, 0.3, -0.3), strict=True)),
+    **dict(zip((f"knee_behind_m{i}" for i in _M), (-0.8, -0.1, -0.1, -0.3), strict=True)),
+    **dict(zip((f"foot_behind_m{i}" for i in _M), (0.0, 0.15, 0.0, 0.0), strict=True)),
+    **{f"stance_knee_m{i}": 0.05 for i in _M},
+    **{f"ankle_ff_m{i}": 0.0 for i in _M},
     "hip_fb_y": 0.0,
     "hip_fb_v": 0.0,
     "kp_hip": 100.0,
@@ -58,18 +47,24 @@ INITIAL_GUESS: dict[str, float] = {
     "ankle_fb_v": 0.0,
     "phase_angle": 0.0,
     "ankle_fb_swing": 0.0,
-    **{f"knee_ahead_m{i}": -0.1 for i in range(1, 5)},
-    **dict(
-        zip(
-            ("foot_ahead_m1", "foot_ahead_m2", "foot_ahead_m3", "foot_ahead_m4"),
-            (0.05, 0.05, 0.0, 0.0),
-            strict=True,
-        )
-    ),
-    "kp_stance_foot": 40.0,
+    # the "ahead" targets start equal to the "behind" ones (no blend) ...
+    **dict(zip((f"knee_ahead_m{i}" for i in _M), (-0.8, -0.1, -0.1, -0.3), strict=True)),
+    **dict(zip((f"foot_ahead_m{i}" for i in _M), (0.0, 0.15, 0.0, 0.0), strict=True)),
+    # ... and the stance-foot pitch PD starts off
+    "kp_stance_foot": 0.0,
     "foot_target": -0.3,
-    "kd_stance_foot": 5.0,
+    "kd_stance_foot": 0.0,
 }
+EXTRAS = (
+    "phase_angle",
+    "ankle_fb_swing",
+    *(f"knee_ahead_m{i}" for i in _M),
+    *(f"foot_ahead_m{i}" for i in _M),
+    "kp_stance_foot",
+    "foot_target",
+    "kd_stance_foot",
+)
+"""Parameters held at the guess when ``--basic true`` (per-model PD targets only)."""
 """The search's starting mean (angles in rad, torques in N m, gains in N m/rad, N m s/rad)."""
 
 
@@ -94,11 +89,12 @@ class FSMSearchConfig:
 
     iterations: int = 200
     population: int = 384
-    elite: int = 16
+    elite: int = 8
     periods: int = 750  # 15 s of simulated time per candidate
     spread: float = 1.0  # multiplies the initial standard deviations
     alive_weight: float = 2.0  # score per second inside the models
     init: str = ""  # start from this controller JSON instead of INITIAL_GUESS
+    basic: bool = False  # hold EXTRAS fixed (the first stage from the hand-set guess)
     preset: str = "fast"  # the env preset PPO trains on (RK2 x 4)
     seed: int = 0
     out_dir: Path = Path("runs")
@@ -134,7 +130,9 @@ def search(cfg: FSMSearchConfig):
     """The cross-entropy search; returns (mean, best candidate, history)."""
     rng = np.random.default_rng(cfg.seed)
     mu = load(cfg.init) if cfg.init else np.array([INITIAL_GUESS[k] for k in PARAM_NAMES])
-    sd = cfg.spread * np.array([_spread(k) for k in PARAM_NAMES])
+    sd = cfg.spread * np.array(
+        [0.0 if cfg.basic and k in EXTRAS else _spread(k) for k in PARAM_NAMES]
+    )
     floor = 0.02 * sd
     best, best_score, history = mu.copy(), -np.inf, []
     for it in progress(range(cfg.iterations), cfg.iterations, "CEM", cfg.progress):
