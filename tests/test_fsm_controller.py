@@ -120,3 +120,20 @@ def test_ppo_config_reaches_the_env():
         amap = venv.action_map if vec == "batched" else venv.envs[0].action_map
         assert amap.base is not None and amap.residual_scale == 0.2
         venv.close()
+
+
+def test_train_ppo_residual_and_evaluate_smoke(tmp_path):
+    """A residual run on the committed controller trains, saves and evaluates (tiny budget)."""
+    from training import evaluate, train_ppo
+
+    args = ["--config", "training/configs/ppo_residual.toml", "--out-dir", str(tmp_path)]
+    args += ["--total-timesteps", "256", "--n-envs", "2", "--n-steps", "128", "--batch-size", "64"]
+    args += ["--n-epochs", "1", "--eval-freq", "256", "--eval-episodes", "1", "--progress", "false"]
+    assert train_ppo.main(args) == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    assert (
+        'base_controller = "training/controllers/fsm_cem.json"' in (run / "config.toml").read_text()
+    )
+    assert evaluate.main([str(run), "--episodes", "1"]) == 0
+    ep = json.loads((run / "evaluation.json").read_text())["episodes"][0]
+    assert ep["steps_completed"] >= 0 and np.isfinite(ep["distance_m"])
