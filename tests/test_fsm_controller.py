@@ -137,3 +137,17 @@ def test_train_ppo_residual_and_evaluate_smoke(tmp_path):
     assert evaluate.main([str(run), "--episodes", "1"]) == 0
     ep = json.loads((run / "evaluation.json").read_text())["episodes"][0]
     assert ep["steps_completed"] >= 0 and np.isfinite(ep["distance_m"])
+
+
+def test_optimize_fsm_smoke(tmp_path):
+    """The search runs a tiny budget and writes a loadable controller with its measured steps."""
+    from training import optimize_fsm
+
+    args = ["--out-dir", str(tmp_path), "--iterations", "2", "--population", "4"]
+    assert optimize_fsm.main([*args, "--periods", "10", "--progress", "false"]) == 0
+    (run,) = (tmp_path / "optimize_fsm").iterdir()
+    x = F.load(run / "controller.json")
+    with open(run / "controller.json") as fh:
+        measured = json.load(fh)["measured"]["steps_by_reset_seed_0_9"]
+    assert set(measured) == {"fast", "default"} and len(measured["fast"]) == 10
+    assert x.shape == (F.N_PARAMS,)

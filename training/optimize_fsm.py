@@ -55,6 +55,7 @@ INITIAL_GUESS: dict[str, float] = {
     "foot_target": -0.3,
     "kd_stance_foot": 0.0,
 }
+"""The search's starting mean (angles in rad, torques in N m, gains in N m/rad, N m s/rad)."""
 EXTRAS = (
     "phase_angle",
     "ankle_fb_swing",
@@ -65,7 +66,6 @@ EXTRAS = (
     "kd_stance_foot",
 )
 """Parameters held at the guess when ``--basic true`` (per-model PD targets only)."""
-"""The search's starting mean (angles in rad, torques in N m, gains in N m/rad, N m s/rad)."""
 
 
 def _spread(name: str) -> float:
@@ -158,13 +158,10 @@ def evaluate(x: np.ndarray, seeds: int = 10, periods: int = 1000) -> dict:
     """Completed steps and hip travel over reset-noise seeds 0..seeds-1, per preset."""
     out = {}
     for preset in ("fast", "default"):
-        rows = np.repeat(x[None, :], seeds, axis=0)
-        steps, hips = [], []
-        for s in range(seeds):  # seed s for episode s, as training.evaluate does
-            _, st, hip = rollout(rows[s : s + 1], periods, s, preset)
-            steps.append(int(st[0]))
-            hips.append(float(hip[0]))
-        out[preset] = {"steps": steps, "steps_mean": float(np.mean(steps)), "distance_m": hips}
+        # one batch: sub-env i is seeded 0 + i, as episode i of training.evaluate
+        _, st, hip = rollout(np.repeat(x[None, :], seeds, axis=0), periods, 0, preset)
+        steps = [int(v) for v in st]
+        out[preset] = {"steps": steps, "steps_mean": float(st.mean()), "distance_m": hip.tolist()}
     return out
 
 

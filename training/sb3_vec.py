@@ -32,9 +32,10 @@ def make_sb3_vec_env(
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import biped_constraint_env  # noqa: F401
+    from biped_constraint_env.env import TORQUE_LIMIT_NM
     from training.fsm_controller import ActionMap
 
-    limit = float(env_kwargs.get("torque_limit_nm", 150.0))
+    limit = float(env_kwargs.get("torque_limit_nm", TORQUE_LIMIT_NM))
     action_map = action_map or ActionMap(limit)
     if vec == "batched":
         from gymnasium.vector import AutoresetMode
