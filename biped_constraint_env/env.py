@@ -329,6 +329,10 @@ class ConstrainedBipedEnv(gym.Env):
     ## Action Space
     ``Box(-torque_limit_nm, torque_limit_nm, (5,), float32)``, torques in N m, held over
     the control period ``dt``, in the *current* numbering (index 0 acts at the stance ankle).
+    With ``stop_at_switch=True`` a period ends early, just after a model switch (its impact
+    and, at 3 -> 4, the renumbering applied), so that the next action acts from the switch
+    itself: the paper changes the torque at the switch, and a torque held past the 3 -> 4
+    renumbering would otherwise act on other joints. ``info["t"]`` gives the time.
 
     | Num | joint | acts on (link i vs i-1)        | limit [N m] | sign |
     |-----|-------|--------------------------------|-------------|------|
@@ -404,6 +408,7 @@ class ConstrainedBipedEnv(gym.Env):
     | dt | float | 0.02 | control period [s] | dynamics, reward |
     | integrator, substeps, impact, locate_events, jdot, strict, | | None | override | dynamics |
     | heel_force_includes_foot_weight | | | one option of the preset (``SimOptions``) | |
+    | stop_at_switch | bool | None (off) | end a period at a model switch (event-driven) | dyn. |
     | torque_limit_nm | float | 150 | action bound [N m] | action |
     | out_of_range | str | "clip" | "clip" or "raise" | action |
     | forward_reward_weight | float | 1.0 | per (m/s) of hip progress | reward |
@@ -444,6 +449,7 @@ class ConstrainedBipedEnv(gym.Env):
         jdot: str | None = None,
         strict: bool | None = None,
         heel_force_includes_foot_weight: bool | None = None,
+        stop_at_switch: bool | None = None,
         torque_limit_nm: float = TORQUE_LIMIT_NM,
         out_of_range: str = "clip",
         forward_reward_weight: float = 1.0,
@@ -470,6 +476,7 @@ class ConstrainedBipedEnv(gym.Env):
                 jdot=jdot,
                 strict=strict,
                 heel_force_includes_foot_weight=heel_force_includes_foot_weight,
+                stop_at_switch=stop_at_switch,
             ),
         )
         if not (np.isfinite(torque_limit_nm) and torque_limit_nm > 0):

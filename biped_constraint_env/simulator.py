@@ -37,6 +37,7 @@ from .hybrid import (
     IO_MASS_RNEA,
     IO_MAX_SWITCHES,
     IO_PROJECT,
+    IO_STOP_AT_SWITCH,
     IO_STRICT,
     IO_SUBSTEPS,
     N_FOPT,
@@ -104,6 +105,10 @@ class SimOptions:
         max_switches: model switches allowed in one control period before ZENO is declared.
         mass_matrix: ``"crba"`` (composite bodies, one pass) or ``"newton_euler_columns"``
             (the paper's route, eq. 14: six Newton-Euler passes with unit accelerations).
+        stop_at_switch: end the control period early, just after the first model switch
+            (its impact and renumbering applied), so that a controller can choose the new
+            model's torques at the switch itself (event-driven control; the paper changes the
+            torque at the switch). Off: the torque row of each model holds to the period's end.
     """
 
     integrator: str = "rk4"
@@ -119,6 +124,7 @@ class SimOptions:
     time_tol_s: float = 1e-7
     max_switches: int = 8
     mass_matrix: str = "crba"
+    stop_at_switch: bool = False
 
     def __post_init__(self) -> None:
         """Validate every option."""
@@ -157,6 +163,7 @@ class SimOptions:
         iopt[IO_PROJECT] = self.project_constraints
         iopt[IO_MAX_SWITCHES] = self.max_switches
         iopt[IO_MASS_RNEA] = self.mass_matrix == "newton_euler_columns"
+        iopt[IO_STOP_AT_SWITCH] = self.stop_at_switch
         fopt = np.zeros(N_FOPT)
         fopt[FO_SLIP_EPS] = self.slip_eps_mps
         fopt[FO_POS_TOL] = self.pos_tol_m
@@ -599,6 +606,13 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
                 status = 1
                 break
             check = True
+            if iopt[IO_STOP_AT_SWITCH] != 0:
+                # hand control back at the switch: forces of the new model at the new state
+                # with its torque row (its guards are checked when the next period starts)
+                for j in range(5):
+                    tau6[j + 1] = tau_table[mode - 1, j]
+                nb_evaluate_w(chs[side], scs[side], mode, q, qd, tau6, iopt, fopt, 0.0, W, fo, g)
+                break
         else:
             terminal = strict or FORCE_EVENT_FLAGS[k] == 0
             nev = _record(ev, nev, t, k, mode, mode, 1 if terminal else 0)
@@ -645,8 +659,9 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
 
 
 @njit(cache=True)
-def _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV,
-                   lo, hi):
+def _advance_range(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, lo, hi
+):
     """:func:`nb_advance_w` over rows lo..hi-1 with one workspace; rows with STATUS != 0 skip."""
     W = nb_make_work()
     S = nb_make_scratch()
@@ -654,26 +669,62 @@ def _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FOR
         if STATUS[i] != 0:
             NEV[i] = 0
             continue
-        STATUS[i], NEV[i] = nb_advance_w(chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt,
-                                         fopt, a, b, EV[i], FORCES[i], W, S)
+        STATUS[i], NEV[i] = nb_advance_w(
+            chs,
+            scs,
+            Q[i],
+            QD[i],
+            IST[i],
+            FST[i],
+            TAU[i],
+            dt,
+            iopt,
+            fopt,
+            a,
+            b,
+            EV[i],
+            FORCES[i],
+            W,
+            S,
+        )
 
 
 @njit(cache=True)
 def nb_advance_batch(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV):
     """:func:`nb_advance_w` over N simulators (rows of every array); skips rows with STATUS != 0."""
-    _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV,
-                   0, Q.shape[0])
+    _advance_range(
+        chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, 0, Q.shape[0]
+    )
 
 
 @njit(cache=True, parallel=True)
-def nb_advance_batch_parallel(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES,
-                              STATUS, NEV, nt):
+def nb_advance_batch_parallel(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, nt
+):
     """:func:`nb_advance_batch` split into ``nt`` chunks, one per thread (same results)."""
     n = Q.shape[0]
     chunk = (n + nt - 1) // nt
     for c in numba.prange(nt):
-        _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS,
-                       NEV, c * chunk, min(n, (c + 1) * chunk))
+        _advance_range(
+            chs,
+            scs,
+            Q,
+            QD,
+            IST,
+            FST,
+            TAU,
+            dt,
+            iopt,
+            fopt,
+            a,
+            b,
+            EV,
+            FORCES,
+            STATUS,
+            NEV,
+            c * chunk,
+            min(n, (c + 1) * chunk),
+        )
 
 
 PARALLEL_MIN_BATCH = 8

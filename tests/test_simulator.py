@@ -336,3 +336,30 @@ def test_flat_landing_is_a_switch_not_an_ankle_below_ground(params):
         if (3, 4) in [(e.mode_from, e.mode_to) for e in res.events] or res.terminated:
             break
     assert EventCode.MODE_SWITCH in seen and EventCode.BODY_BELOW_GROUND not in seen[:1]
+
+
+def test_stop_at_switch_hands_control_back_at_the_switch():
+    """stop_at_switch ends the period at the first switch (impact and renumbering applied);
+    finishing the period from there with the same torques lands where the full period does."""
+    params = paper_biped()
+    s = model3_state(params.chain(0), phi5=0.05)
+    tau = np.zeros(5)
+    for _ in range(50):
+        full = step(params, s, tau, 0.02, DEFAULT_OPTIONS)
+        if full.events:
+            break
+        s = full.state
+    switch = full.events[0]
+    assert switch.code == EventCode.MODE_SWITCH and (switch.mode_from, switch.mode_to) == (3, 4)
+    part = step(params, s, tau, 0.02, DEFAULT_OPTIONS.replace(stop_at_switch=True))
+    assert not part.terminated and len(part.events) == 1
+    assert part.state.t == pytest.approx(switch.t, abs=1e-12) and part.state.t < s.t + 0.02
+    assert int(part.state.mode) == 4 and part.state.stance_side == 1  # renumbered
+    rest = step(params, part.state, tau, s.t + 0.02 - part.state.t, DEFAULT_OPTIONS)
+    assert rest.state.t == pytest.approx(full.state.t, abs=1e-12)
+    np.testing.assert_allclose(rest.state.q, full.state.q, atol=1e-5)
+    np.testing.assert_allclose(rest.state.qd, full.state.qd, atol=1e-3)
+    # without a switch in the period, the option changes nothing
+    quiet = step(params, full.state, tau, 0.001, DEFAULT_OPTIONS.replace(stop_at_switch=True))
+    same = step(params, full.state, tau, 0.001, DEFAULT_OPTIONS)
+    np.testing.assert_array_equal(quiet.state.q, same.state.q)
