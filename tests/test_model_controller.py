@@ -1,0 +1,71 @@
+"""The model-based controller (training/model_controller.py): state from obs, legal contact
+forces at the sample, and its documented mid-stride result through the event-driven env."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from biped_constraint_env.env import ConstrainedBipedEnv
+from biped_constraint_env.simulator import evaluate
+from training.model_controller import (
+    DEFAULT_GAINS,
+    ModelController,
+    midstride_state,
+    run_episode,
+    state_from_obs,
+)
+
+
+def _env():
+    return ConstrainedBipedEnv(dt=0.005, stop_at_switch=True)
+
+
+def _start(rate=-1.0):
+    s = midstride_state(rate)
+    return dict(q=s.q, qd=s.qd, mode=2)
+
+
+def test_state_from_obs_matches_the_simulator_state():
+    env = _env()
+    ctl = ModelController(params=env.params, options=env.options)
+    obs, _ = env.reset(options=_start())
+    for _ in range(120):  # through a heel strike and the renumbering
+        obs, _, term, _, _ = env.step(ctl(obs))
+        st, got = env.state, state_from_obs(obs)
+        assert (int(got.mode), got.stance_side) == (int(st.mode), st.stance_side)
+        np.testing.assert_allclose(got.q, st.q, atol=1e-12)
+        np.testing.assert_allclose(got.qd, st.qd, atol=1e-12)
+        if term:
+            break
+    assert env.state.stance_side == 1  # the legs did swap roles
+
+
+def test_torques_keep_the_contacts_pushing_at_the_sample():
+    env = _env()
+    ctl = ModelController(params=env.params, options=env.options)
+    obs, _ = env.reset(options=_start())
+    fmin = DEFAULT_GAINS["fmin"]
+    for _ in range(60):
+        st = env.state
+        tau = ctl(obs)
+        _, forces, _ = evaluate(env.params, st, tau, env.options)
+        assert forces[0] >= fmin - 0.1  # at least fmin (a row of weight 1e3: within 0.1 N)
+        assert np.all(np.abs(tau) <= 150.0)
+        obs, _, term, _, _ = env.step(tau)
+        assert not term
+
+
+def test_documented_midstride_walk():
+    """README: from the mid-stride start at -1 rad/s, 6 complete strict steps, then the stance
+    heel comes down in model 2 (out of the paper's four models)."""
+    env = _env()
+    ctl = ModelController(params=env.params, options=env.options)
+    steps, dist, reason, _ = run_episode(env, ctl, _start(-1.0), max_periods=4000)
+    assert (steps, reason) == (6, "stance_heel_down")
+    assert dist == pytest.approx(7.62, abs=0.01)
+
+
+def test_unknown_gain_raises():
+    with pytest.raises(ValueError, match="unknown gains"):
+        ModelController({"kpp": 1.0})

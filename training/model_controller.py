@@ -1,0 +1,330 @@
+"""A model-based walking controller: operational-space torques from the simulator's own model.
+
+Every control period the controller reads the state from the observation (joint angles and
+rates, model, stance side), asks the simulator for the affine map from the five torques to the
+joint accelerations and contact forces of the current model (six solves of that model), and
+chooses the torques by a small least-squares problem with inequality constraints:
+
+* tracking rows (computed torque, PD on the output error) for, per model,
+  - model 1 (foot flat): the stance knee; until the hip passes ``hy_lift`` ahead of the stance
+    toe the swing leg holds the start posture and the stance ankle loads the heel (centre of
+    pressure at the heel, which drives the body forward); after that the swing leg swings and
+    the ankle unloads the heel (target ``heel_f``) so that the heel lifts (model 2);
+  - model 2 (toe pivot): ankle rate damped (foot and shank turn together about the toe), stance
+    knee, swing thigh toward the landing angle ``land`` (+ feedback on hip speed and position),
+    swing knee flexed (``flex``) and extended (``knee_land``) as the thigh nears ``land``,
+    swing foot toe-up (``foot_up``) so that the heel strikes first;
+  - model 3 (toe + heel): rates damped, swing foot rotated down (``kp3``, ``kd3``);
+  - model 4 (new foot flat + old toe): stance knee, trailing knee flexed, old toe unloaded
+    (target ``toe_lift_f``) so that it lifts (model 1 with the roles swapped);
+* inequality constraints, enforced by an active set (a violated one becomes a row of weight
+  1e3, so it holds to within about 0.1 N): every contact force that must push stays
+  >= ``fmin`` (stance toe, the flat foot's ends, the heel in model 3), the trailing foot's
+  toe and heel accelerate away from the ground while it is below ``zc`` and behind the stance
+  toe (+ ``clear_y``), and the torque limits.
+
+The contact forces are exact (the simulator's own Newton-Euler solve), so the torques it picks
+keep the contacts legal at the sample; between samples the torque is held. With the paper's
+20 ms period and torques held through a model switch that is not enough (a torque chosen for
+model 3 acts on other joints after the 3 -> 4 renumbering): the controller is meant for the env
+with ``stop_at_switch=True`` and a short period (``dt=0.005``). README, "Learning to walk
+further", reports what it does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+from biped_constraint_env.env import OBS_NAMES, TORQUE_LIMIT_NM
+from biped_constraint_env.model import BipedParams, paper_biped
+from biped_constraint_env.modes import Mode
+from biped_constraint_env.simulator import (
+    DEFAULT_OPTIONS,
+    SimOptions,
+    SimState,
+    evaluate,
+    keypoints,
+)
+
+_I = {n: i for i, n in enumerate(OBS_NAMES)}
+# outputs y = C q + c over (theta0, q1..q5): stance ankle, stance knee, swing thigh from the
+# downward vertical (+ forward), swing knee, swing foot pitch (0 flat, + toe up), stance
+# shank from the upward vertical (+ backward)
+_C = np.array(
+    [
+        [0, 1, 0, 0, 0, 0],
+        [0, 0, 1, 0, 0, 0],
+        [1, 1, 1, 1, 0, 0],
+        [0, 0, 0, 0, 1, 0],
+        [1, 1, 1, 1, 1, 1],
+        [1, 1, 0, 0, 0, 0],
+    ],
+    dtype=np.float64,
+)
+_C0 = np.zeros(6)  # the swing foot pitch phi5 is the sum plus 2 pi
+START_POSTURE = (-0.3, -0.4, 0.7)  # q3..q5 held in model 1 before the first heel lift [rad]
+
+DEFAULT_GAINS: dict[str, float] = {
+    "kp": 100.0,  # output PD [1/s^2]
+    "kd": 18.5,  # [1/s]
+    "emax": 0.59,  # error clip [rad]
+    "land": 0.38,  # swing-thigh landing angle [rad]
+    "fb_v": 0.0,  # landing angle per m/s of hip speed above v_des [rad s/m]
+    "v_des": 1.0,  # [m/s]
+    "fb_y": 0.0,  # landing angle per m of hip ahead of the stance toe [rad/m]
+    "blend": 0.157,  # knee extends over this last part of the thigh's swing [rad]
+    "flex": 0.76,  # swing knee flexion [rad]
+    "knee_land": 0.048,  # swing knee flexion at landing [rad]
+    "foot_up": 0.255,  # swing foot pitch, toe up [rad]
+    "sk": 0.0755,  # stance knee [rad]
+    "hy_lift": 0.11,  # hip ahead of the stance toe at which the heel is unloaded [m]
+    "heel_f": -5.3,  # heel force target when unloading it [N]
+    "toe_lift_f": -21.4,  # old-toe force target in model 4 [N]
+    "kp3": 23.4,  # swing foot rotation in model 3 [1/s^2]
+    "kd3": 5.56,  # [1/s]
+    "fmin": 8.8,  # least push of a contact that must push [N]
+    "zc": 0.0557,  # clearance of the trailing foot [m]
+    "kpz": 100.0,  # clearance PD [1/s^2]
+    "kdz": 20.0,  # [1/s]
+    "clear_y": 0.155,  # clearance applies while the swing ankle is behind stance toe + this [m]
+    "w_force": 1.0,  # weight of the force-target rows
+    "reg": 1e-4,  # Tikhonov regularisation of the torques
+}
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _smooth(x: float) -> float:
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3 - 2 * x)
+
+
+def state_from_obs(obs: np.ndarray) -> SimState:
+    """The simulator state (up to root_y, which the dynamics do not use) from one observation."""
+    obs = np.asarray(obs, dtype=np.float64)
+    mode = int(np.argmax(obs[_I["mode_1"] : _I["mode_4"] + 1])) + 1
+    q = obs[_I["theta0"] : _I["q5"] + 1].copy()
+    qd = obs[_I["theta0_dot"] : _I["q5_dot"] + 1].copy()
+    if mode in (1, 4):
+        q[0] = qd[0] = 0.0
+    return SimState(0.0, Mode(mode), int(round(obs[_I["stance_side"]])), q, qd)
+
+
+class ModelController:
+    """Torques [N m] (5,) from an observation or a state; see the module docstring."""
+
+    def __init__(
+        self,
+        gains: dict[str, float] | None = None,
+        params: BipedParams | None = None,
+        options: SimOptions = DEFAULT_OPTIONS,
+        limit: float = TORQUE_LIMIT_NM,
+    ):
+        """``gains`` override :data:`DEFAULT_GAINS` (unknown names raise ValueError)."""
+        unknown = set(gains or {}) - set(DEFAULT_GAINS)
+        if unknown:
+            raise ValueError(f"unknown gains {sorted(unknown)}; known: {sorted(DEFAULT_GAINS)}")
+        self.g = {**DEFAULT_GAINS, **(gains or {})}
+        if not all(np.isfinite(v) for v in self.g.values()):
+            raise ValueError("gains must be finite")
+        self.params = params if params is not None else paper_biped()
+        self.options = options
+        self.limit = float(limit)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """Torques for one observation (24,) or a batch (n, 24) -> (5,) or (n, 5)."""
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.ndim == 2:
+            return np.stack([self.torques(state_from_obs(o)) for o in obs])
+        return self.torques(state_from_obs(obs))
+
+    # ------------------------------------------------------------------ model queries
+    def _affine(self, state: SimState):
+        """Qdd = A tau + b (6x5, 6) and forces = F tau + f0 (5x5, 5) of the current model."""
+        z = np.zeros(5)
+        qdd0, f0, _ = evaluate(self.params, state, z, self.options)
+        A, F = np.zeros((6, 5)), np.zeros((5, 5))
+        for i in range(5):
+            z[i] = 1.0
+            qdd, f, _ = evaluate(self.params, state, z, self.options)
+            z[i] = 0.0
+            A[:, i], F[:, i] = qdd - qdd0, f - f0
+        return A, qdd0, F, f0
+
+    def _point(self, state: SimState, name: str, axis: int):
+        """Coordinate, Jacobian row (6,) and J-dot q-dot of a keypoint (central differences)."""
+        q, qd = state.q, state.qd
+
+        def at(qq):
+            return keypoints(self.params, dataclasses.replace(state, q=qq))[name][axis]
+
+        x0 = at(q)
+        h = 1e-6
+        J = np.array([(at(q + h * e) - at(q - h * e)) / (2 * h) for e in np.eye(6)])
+        hh = 1e-4
+        return x0, J, (at(q + hh * qd) - 2 * x0 + at(q - hh * qd)) / hh**2
+
+    # ------------------------------------------------------------------ the law
+    def torques(self, state: SimState) -> np.ndarray:
+        """Torques [N m] (5,) for a simulator state."""
+        g = self.g
+        m = int(state.mode)
+        q, qd = state.q, state.qd
+        y, yd = _wrap(_C @ q + _C0), _C @ qd
+        pts = keypoints(self.params, state)
+        hy = pts["hip"][0] - pts["stance_toe"][0]
+        _, Jhip, _ = self._point(state, "hip", 0)
+        vy = Jhip @ qd
+        A, b, F, f0 = self._affine(state)
+        rows: list[tuple[float, np.ndarray, float]] = []  # weight, row over tau, target
+
+        def track(k, ref, kp=g["kp"], kd=g["kd"]):
+            des = kp * np.clip(_wrap(ref - y[k]), -g["emax"], g["emax"]) - kd * yd[k]
+            rows.append((1.0, _C[k] @ A, des - _C[k] @ b))
+
+        def damp(k):
+            track(k, y[k], 0.0, g["kd"])
+
+        def force(i, target):
+            rows.append((g["w_force"], F[i] / 10, (target - f0[i]) / 10))
+
+        land = g["land"] + g["fb_v"] * (vy - g["v_des"]) + g["fb_y"] * hy
+        s = _smooth((y[2] - land + g["blend"]) / g["blend"])
+        knee = -g["flex"] * (1 - s) - g["knee_land"] * s
+        starting = m == 1 and hy < g["hy_lift"]
+        if m == 1:
+            track(1, g["sk"])
+            if starting:  # hold the start posture of the swing leg, load the heel
+                for j, ref in zip((3, 4, 5), START_POSTURE, strict=True):
+                    rows.append((1.0, A[j], g["kp"] * (ref - q[j]) - g["kd"] * qd[j] - b[j]))
+                force(0, g["fmin"] + 1.0)
+            else:
+                track(2, land)
+                track(3, knee)
+                track(4, g["foot_up"])
+                force(1, g["heel_f"])
+        elif m == 2:
+            damp(0)
+            track(1, g["sk"])
+            track(2, land)
+            track(3, knee)
+            track(4, g["foot_up"])
+        elif m == 3:
+            damp(0)
+            track(1, g["sk"])
+            damp(2)
+            damp(3)
+            track(4, -0.3, g["kp3"], g["kd3"])
+        else:
+            track(1, g["sk"])
+            track(3, -g["flex"])
+            rows.append((0.3, _C[5] @ A, -g["kd"] * yd[5] - _C[5] @ b))
+            force(2, g["toe_lift_f"])
+
+        ineq: list[tuple[np.ndarray, float, float]] = []  # row @ tau + offset >= bound
+        fmin = g["fmin"]
+        if m in (1, 2) and pts["swing_ankle"][0] < pts["stance_toe"][0] + g["clear_y"]:
+            for name in ("swing_toe", "swing_heel"):
+                z, Jz, acc0 = self._point(state, name, 1)
+                if z < g["zc"]:
+                    bound = g["kpz"] * (g["zc"] - z) - g["kdz"] * (Jz @ qd)
+                    ineq.append((Jz @ A, Jz @ b + acc0, bound))
+        ineq.append((F[0], f0[0], fmin))  # stance toe (the flat foot's toe in models 1, 4)
+        if starting or m == 4:
+            ineq.append((F[1], f0[1], fmin))  # flat foot's heel
+        if m == 3:
+            ineq.append((F[2], f0[2], fmin))  # swing heel
+        for i in range(5):
+            e = np.zeros(5)
+            e[i] = 1.0
+            ineq += [(e, 0.0, -self.limit), (-e, 0.0, -self.limit)]
+        active: list[int] = []
+        for _ in range(8):
+            rr = rows + [(1e3, ineq[i][0], ineq[i][2] - ineq[i][1]) for i in active]
+            w = np.array([r[0] for r in rr])
+            R = np.array([r[1] for r in rr])
+            t = np.array([r[2] for r in rr])
+            tau = np.linalg.solve(
+                (R * w[:, None]).T @ R + g["reg"] * np.eye(5), (R * w[:, None]).T @ t
+            )
+            slack = [(c[0] @ tau + c[1] - c[2], i) for i, c in enumerate(ineq) if i not in active]
+            worst = min(slack, default=(0.0, -1))
+            if worst[0] >= -1e-6:
+                break
+            active.append(worst[1])
+        return np.clip(tau, -self.limit, self.limit)
+
+
+def midstride_state(rate: float = -1.0, theta0: float = -0.2, lean: float = 0.1) -> SimState:
+    """A model-2 start state, turning about the stance toe at ``rate`` [rad/s] (< 0: forward).
+
+    The heel is up by -theta0 [rad], the body leans forward by ``lean`` [rad], and the swing
+    leg is behind with its knee flexed.
+    """
+    q1 = -lean - theta0
+    q2, sw, q4 = 0.05, -0.3, -0.6
+    q3 = sw - (theta0 + q1 + q2)
+    q = np.array([theta0, q1, q2, q3, q4, -(sw + q4)])
+    return SimState(0.0, Mode.TOE_PIVOT, 0, q, np.array([rate, 0.0, 0.0, -rate, 0.0, 0.0]))
+
+
+def run_episode(env, controller, options=None, seed=None, max_periods=20_000):
+    """Run one episode; returns (steps, hip travel [m], termination reason, sim time [s])."""
+    obs, info = env.reset(seed=seed, options=options)
+    y0 = info["hip_y"]
+    for _ in range(max_periods):
+        obs, _, terminated, truncated, info = env.step(controller(obs))
+        if terminated or truncated:
+            break
+    return info["steps_completed"], info["hip_y"] - y0, info["termination_reason"], info["t"]
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m training.model_controller``: run the controller through the env."""
+    from biped_constraint_env.env import ConstrainedBipedEnv
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--dt", type=float, default=0.005, help="control period [s]")
+    ap.add_argument("--preset", default="default")
+    ap.add_argument("--seconds", type=float, default=30.0, help="simulated time limit [s]")
+    ap.add_argument(
+        "--rates",
+        type=float,
+        nargs="+",
+        default=[-1.0],
+        help="mid-stride start rates about the stance toe [rad/s]",
+    )
+    ap.add_argument("--rest", action="store_true", help="start at rest (env reset) instead")
+    ap.add_argument("--seeds", type=int, default=10, help="reset seeds with --rest")
+    ap.add_argument("--gains", type=Path, help="JSON {name: value} overriding the defaults")
+    a = ap.parse_args(argv)
+    gains = json.loads(a.gains.read_text()) if a.gains else None
+    env = ConstrainedBipedEnv(preset=a.preset, dt=a.dt, stop_at_switch=True)
+    ctl = ModelController(gains, env.params, env.options)
+    n = int(a.seconds / a.dt) * 2
+    runs = (
+        [(f"seed {s}", None, s) for s in range(a.seeds)]
+        if a.rest
+        else [
+            (
+                f"rate {r:+.2f} rad/s",
+                dict(q=midstride_state(r).q, qd=midstride_state(r).qd, mode=2),
+                None,
+            )
+            for r in a.rates
+        ]
+    )
+    for name, opts, seed in runs:
+        steps, dist, reason, t = run_episode(env, ctl, opts, seed, n)
+        print(f"{name}: {steps} steps, {dist:.2f} m in {t:.2f} s, ended by {reason}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
