@@ -303,10 +303,15 @@ def main(argv: list[str] | None = None) -> None:
     )
     ap.add_argument("--rest", action="store_true", help="start at rest (env reset) instead")
     ap.add_argument("--seeds", type=int, default=10, help="reset seeds with --rest")
+    ap.add_argument(
+        "--hold",
+        action="store_true",
+        help="hold the torque through model switches (env default) instead",
+    )
     ap.add_argument("--gains", type=Path, help="JSON {name: value} overriding the defaults")
     a = ap.parse_args(argv)
     gains = json.loads(a.gains.read_text()) if a.gains else None
-    env = ConstrainedBipedEnv(preset=a.preset, dt=a.dt, stop_at_switch=True)
+    env = ConstrainedBipedEnv(preset=a.preset, dt=a.dt, stop_at_switch=not a.hold)
     ctl = ModelController(gains, env.params, env.options)
     n = int(a.seconds / a.dt) * 2
     runs = (
