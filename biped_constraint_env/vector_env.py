@@ -54,13 +54,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        max_episode_steps: int | None = 1000,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ):
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any):
         """Create the batch; the single env validates the arguments."""
         if kwargs.get("render_mode") is not None:
             raise ValueError("the batched vector env does not render; use gym.make for that")
@@ -150,14 +145,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         terminated = (status == STATUS_TERMINATED) | (status == STATUS_NONFINITE) | fell
         self._fell = fell
         parts = reward_terms(
-            self._hip[:, 0] - hip0,
-            self.dt,
+            self._hip[:, 0] - hip0, self.dt,
             cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2]) - pos0,
-            self._sim.ist[:, 2] - steps0,
-            ~terminated,
-            tau,
-            p.torque_limit_nm,
-            *p.weights,
+            self._sim.ist[:, 2] - steps0, ~terminated, tau, p.torque_limit_nm, *p.weights,
         )
         for part in parts:
             part[resetting] = 0.0
@@ -179,9 +169,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self._observe()
             mask = np.zeros(self.num_envs, bool)
             mask[done] = True
-            infos.update(
-                final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask
-            )
+            infos.update(final_obs=final_obs, _final_obs=mask, final_info=final_info,
+                         _final_info=mask)
         else:
             self._autoreset = terminated | truncated
         return self._obs.copy(), rewards, terminated, truncated, infos
