@@ -161,13 +161,19 @@ class ActionMap:
     adapter, single envs and the evaluation, so training and evaluation act alike.
     """
 
-    def __init__(self, limit: float, base: np.ndarray | None = None, residual_scale: float = 1.0):
-        """``base``: controller parameters (N_PARAMS,) or None; ``residual_scale`` in (0, 1]."""
+    def __init__(self, limit: float, base=None, residual_scale: float = 1.0):
+        """Map actions to torques, on top of ``base`` if given.
+
+        ``base``: this controller's parameters (N_PARAMS,), another controller (a callable
+        mapping observations (n, 24) to torques (n, 5), e.g.
+        :class:`training.model_controller.ModelController`), or None. ``residual_scale``: the
+        residual bound as a fraction of ``limit``, in (0, 1].
+        """
         if not (np.isfinite(limit) and limit > 0):
             raise ValueError(f"limit must be finite and > 0, got {limit!r}")
         if not (0 < residual_scale <= 1):
             raise ValueError(f"residual_scale must be in (0, 1], got {residual_scale!r}")
-        if base is not None:
+        if base is not None and not callable(base):
             base = np.asarray(base, dtype=np.float64)
             if base.shape != (N_PARAMS,) or not np.all(np.isfinite(base)):
                 raise ValueError(f"base must be {N_PARAMS} finite numbers, got {base.shape}")
@@ -178,11 +184,24 @@ class ActionMap:
         a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
         if self.base is None:
             return a * self.limit
-        tau = torques(self.base, obs, self.limit) + self.residual_scale * self.limit * a
+        obs = np.asarray(obs, dtype=np.float64)
+        b = self.base(obs) if callable(self.base) else torques(self.base, obs, self.limit)
+        tau = b + self.residual_scale * self.limit * a
         return np.clip(tau, -self.limit, self.limit)
 
 
 def action_map_from(base_controller: str, residual_scale: float, limit: float) -> ActionMap:
-    """The :class:`ActionMap` of a training config ("" = no base controller)."""
+    """The :class:`ActionMap` of a training config.
+
+    ``base_controller``: "" (none), a JSON of this controller's parameters, or ``"model"`` /
+    ``"model:GAINS.json"`` for :class:`training.model_controller.ModelController` (default
+    gains, or those overridden by the JSON file).
+    """
+    if base_controller == "model" or base_controller.startswith("model:"):
+        from training.model_controller import ModelController
+
+        path = base_controller.partition(":")[2]
+        gains = json.loads(Path(path).read_text()) if path else None
+        return ActionMap(limit, ModelController(gains, limit=limit), residual_scale)
     base = load(base_controller) if base_controller else None
     return ActionMap(limit, base, residual_scale if base is not None else 1.0)

@@ -34,14 +34,14 @@ further", reports what it does.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 
 from biped_constraint_env.env import OBS_NAMES, TORQUE_LIMIT_NM
-from biped_constraint_env.model import BipedParams, paper_biped
+from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
+from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode
 from biped_constraint_env.simulator import (
     DEFAULT_OPTIONS,
@@ -81,8 +81,10 @@ DEFAULT_GAINS: dict[str, float] = {
     "flex": 0.76,  # swing knee flexion [rad]
     "knee_land": 0.048,  # swing knee flexion at landing [rad]
     "foot_up": 0.255,  # swing foot pitch, toe up [rad]
-    "sk": 0.0755,  # stance knee [rad]
+    "sk": 0.0755,  # stance knee in models 2 and 3 [rad]
+    "sk1": 0.0755,  # stance knee in models 1 and 4 [rad]
     "hy_lift": 0.11,  # hip ahead of the stance toe at which the heel is unloaded [m]
+    "hy_swing": 0.11,  # hip ahead of the stance toe at which the swing leg swings [m]
     "heel_f": -5.3,  # heel force target when unloading it [N]
     "toe_lift_f": -21.4,  # old-toe force target in model 4 [N]
     "kp3": 23.4,  # swing foot rotation in model 3 [1/s^2]
@@ -92,6 +94,9 @@ DEFAULT_GAINS: dict[str, float] = {
     "kpz": 100.0,  # clearance PD [1/s^2]
     "kdz": 20.0,  # [1/s]
     "clear_y": 0.155,  # clearance applies while the swing ankle is behind stance toe + this [m]
+    "v1": 0.0,  # model-1 hip-speed target [m/s] for the stance ankle (0: push, heel loaded)
+    "kv": 5.0,  # hip-speed feedback gain in model 1 [1/s]
+    "lift_dv": 0.0,  # heel lift delayed by this per m/s of hip speed below v1 [m s/m]
     "w_force": 1.0,  # weight of the force-target rows
     "reg": 1e-4,  # Tikhonov regularisation of the torques
 }
@@ -159,17 +164,18 @@ class ModelController:
         return A, qdd0, F, f0
 
     def _point(self, state: SimState, name: str, axis: int):
-        """Coordinate, Jacobian row (6,) and J-dot q-dot of a keypoint (central differences)."""
-        q, qd = state.q, state.qd
+        """Coordinate, exact Jacobian row (6,) and J-dot q-dot of a keypoint along ``axis``.
 
-        def at(qq):
-            return keypoints(self.params, dataclasses.replace(state, q=qq))[name][axis]
-
-        x0 = at(q)
-        h = 1e-6
-        J = np.array([(at(q + h * e) - at(q - h * e)) / (2 * h) for e in np.eye(6)])
-        hh = 1e-4
-        return x0, J, (at(q + hh * qd) - 2 * x0 + at(q - hh * qd)) / hh**2
+        ``name`` is "hip", "swing_toe" or "swing_heel"; ``axis`` 0 is y (forward), 1 is z (up);
+        the coordinate is relative to the root (the stance toe).
+        """
+        ch = self.params.chain(state.stance_side)
+        link, s = 3, 0.0  # the hip is joint 3, the origin of link 3
+        if name != "hip":
+            link, s = 5, float(ch.packed_scalars[SC_TOE5 if name == "swing_toe" else SC_HEEL5])
+        kin = nb_kin_point(ch.packed, state.q, state.qd, link, s)  # (py, pz, vy, vz, ay, az)
+        J = nb_point_jacobian(ch.packed, state.q, link, s)[axis]
+        return kin[axis], J, kin[4 + axis]
 
     # ------------------------------------------------------------------ the law
     def torques(self, state: SimState) -> np.ndarray:
@@ -180,7 +186,7 @@ class ModelController:
         y, yd = _wrap(_C @ q + _C0), _C @ qd
         pts = keypoints(self.params, state)
         hy = pts["hip"][0] - pts["stance_toe"][0]
-        _, Jhip, _ = self._point(state, "hip", 0)
+        _, Jhip, ahip0 = self._point(state, "hip", 0)
         vy = Jhip @ qd
         A, b, F, f0 = self._affine(state)
         rows: list[tuple[float, np.ndarray, float]] = []  # weight, row over tau, target
@@ -198,18 +204,24 @@ class ModelController:
         land = g["land"] + g["fb_v"] * (vy - g["v_des"]) + g["fb_y"] * hy
         s = _smooth((y[2] - land + g["blend"]) / g["blend"])
         knee = -g["flex"] * (1 - s) - g["knee_land"] * s
-        starting = m == 1 and hy < g["hy_lift"]
+        slow = max(0.0, g["v1"] - vy) if g["v1"] > 0 else 0.0
+        starting = m == 1 and hy < g["hy_lift"] + g["lift_dv"] * slow  # heel still loaded
         if m == 1:
-            track(1, g["sk"])
-            if starting:  # hold the start posture of the swing leg, load the heel
+            track(1, g["sk1"])
+            if hy < g["hy_swing"]:  # hold the start posture of the swing leg
                 for j, ref in zip((3, 4, 5), START_POSTURE, strict=True):
                     rows.append((1.0, A[j], g["kp"] * (ref - q[j]) - g["kd"] * qd[j] - b[j]))
-                force(0, g["fmin"] + 1.0)
             else:
                 track(2, land)
                 track(3, knee)
                 track(4, g["foot_up"])
+            if not starting:  # unload the heel so that it lifts
                 force(1, g["heel_f"])
+            elif g["v1"] > 0:  # stance ankle: hip speed toward v1 (the foot's ends push)
+                ay = g["kv"] * (g["v1"] - vy)
+                rows.append((1.0, Jhip @ A, ay - Jhip @ b - ahip0))
+            else:  # load the heel (centre of pressure at the heel drives the body forward)
+                force(0, g["fmin"] + 1.0)
         elif m == 2:
             damp(0)
             track(1, g["sk"])
@@ -223,7 +235,7 @@ class ModelController:
             damp(3)
             track(4, -0.3, g["kp3"], g["kd3"])
         else:
-            track(1, g["sk"])
+            track(1, g["sk1"])
             track(3, -g["flex"])
             rows.append((0.3, _C[5] @ A, -g["kd"] * yd[5] - _C[5] @ b))
             force(2, g["toe_lift_f"])

@@ -1,0 +1,156 @@
+"""Tune the model-based controller's gains by a cross-entropy search over many starts.
+
+    python -m training.tune_model_controller [--iterations 10] [--population 24] [--cap 12]
+        [--init gains.json] [--out results/tune_mc] [--workers 2]
+
+Every candidate (a dict of :data:`training.model_controller.DEFAULT_GAINS` overrides) runs
+through the env (default physics, strict, ``dt=0.005``, ``stop_at_switch=True``) from every
+start of :data:`STARTS` (mid-stride model-2 states: turning rate about the stance toe and
+heel-up angle), until it falls or completes ``cap`` steps. Score: the mean of the completed
+steps over the starts, plus 0.2 x their minimum (a robust gait counts more than one lucky
+start). The search samples each tuned gain from a normal within :data:`BOUNDS`, keeps the best
+quarter, refits mean and spread, and writes ``best_gains.json`` (the best candidate seen) and
+``history.csv`` (one row per candidate) into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+
+from training.common import progress
+from training.model_controller import DEFAULT_GAINS, ModelController, midstride_state
+
+BOUNDS: dict[str, tuple[float, float]] = {
+    "kp": (60.0, 160.0),
+    "kd": (10.0, 26.0),
+    "emax": (0.3, 0.9),
+    "land": (0.25, 0.5),
+    "fb_v": (-0.2, 0.3),
+    "v_des": (1.0, 2.6),
+    "fb_y": (-0.6, 0.6),
+    "blend": (0.05, 0.3),
+    "flex": (0.4, 1.0),
+    "knee_land": (0.0, 0.2),
+    "foot_up": (0.1, 0.4),
+    "sk": (0.0, 0.2),
+    "sk1": (0.0, 0.6),
+    "hy_lift": (-0.05, 0.25),
+    "heel_f": (-20.0, 0.0),
+    "toe_lift_f": (-40.0, -5.0),
+    "kp3": (10.0, 50.0),
+    "kd3": (2.0, 10.0),
+    "fmin": (5.0, 15.0),
+    "zc": (0.03, 0.1),
+    "clear_y": (0.05, 0.3),
+    "v1": (1.6, 2.8),
+    "kv": (0.0, 10.0),
+    "lift_dv": (0.0, 0.3),
+}
+"""The tuned gains and their search ranges (units as in DEFAULT_GAINS)."""
+
+STARTS: tuple[tuple[float, float], ...] = (
+    (-0.8, -0.2),
+    (-0.9, -0.2),
+    (-1.0, -0.2),
+    (-1.1, -0.2),
+    (-1.2, -0.2),
+    (-1.0, -0.15),
+    (-1.0, -0.25),
+    (-0.95, -0.22),
+)
+"""(rate [rad/s], theta0 [rad]) of :func:`midstride_state` for every scored start."""
+
+
+def run_start(gains: dict[str, float], rate: float, theta0: float, cap: int, dt: float = 0.005):
+    """(completed steps, hip travel [m], termination reason) of one start, at most ``cap`` steps."""
+    from biped_constraint_env.env import ConstrainedBipedEnv
+
+    env = ConstrainedBipedEnv(dt=dt, stop_at_switch=True)
+    ctl = ModelController(gains, env.params, env.options)
+    s = midstride_state(rate, theta0)
+    obs, info = env.reset(options=dict(q=s.q, qd=s.qd, mode=2))
+    y0 = info["hip_y"]
+    for _ in range(int(60.0 / dt)):
+        obs, _, terminated, truncated, info = env.step(ctl(obs))
+        if terminated or truncated or info["steps_completed"] >= cap:
+            break
+    return info["steps_completed"], info["hip_y"] - y0, info["termination_reason"]
+
+
+def _job(args):
+    return run_start(*args)
+
+
+def score(results) -> float:
+    """Mean completed steps over the starts + 0.2 x the minimum."""
+    steps = np.array([r[0] for r in results], dtype=float)
+    return float(steps.mean() + 0.2 * steps.min())
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m training.tune_model_controller``: see the module docstring."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--iterations", type=int, default=10)
+    ap.add_argument("--population", type=int, default=24)
+    ap.add_argument("--cap", type=int, default=12, help="steps at which a start counts as done")
+    ap.add_argument("--init", type=Path, help="gains JSON to start the search mean from")
+    ap.add_argument("--sigma", type=float, default=0.15, help="initial spread / range width")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", type=Path, default=Path("results/tune_mc"))
+    a = ap.parse_args(argv)
+    if a.iterations < 1 or a.population < 4 or a.cap < 1 or a.workers < 1 or a.sigma <= 0:
+        ap.error("need iterations >= 1, population >= 4, cap >= 1, workers >= 1, sigma > 0")
+    init = {**DEFAULT_GAINS, **(json.loads(a.init.read_text()) if a.init else {})}
+    names = list(BOUNDS)
+    lo = np.array([BOUNDS[n][0] for n in names])
+    hi = np.array([BOUNDS[n][1] for n in names])
+    mean = np.clip([init[n] for n in names], lo, hi)
+    sig = a.sigma * (hi - lo)
+    rng = np.random.default_rng(a.seed)
+    a.out.mkdir(parents=True, exist_ok=True)
+    best = (-np.inf, dict(init))
+    rows = []
+    n_elite = max(2, a.population // 4)
+    with Pool(a.workers) as pool:
+        for it in progress(range(a.iterations), a.iterations, "CEM"):
+            cands = [mean] + [
+                np.clip(mean + sig * rng.standard_normal(len(names)), lo, hi)
+                for _ in range(a.population - 1)
+            ]
+            gains = [{**init, **dict(zip(names, map(float, c), strict=True))} for c in cands]
+            jobs = [(g, r, th, a.cap) for g in gains for r, th in STARTS]
+            res = pool.map(_job, jobs, chunksize=1)
+            per = [res[i * len(STARTS) : (i + 1) * len(STARTS)] for i in range(len(cands))]
+            scores = np.array([score(r) for r in per])
+            for g, r, sc in zip(gains, per, scores, strict=True):
+                rows.append([it, sc, *[x[0] for x in r], *[g[n] for n in names]])
+                if sc > best[0]:
+                    best = (sc, g)
+            elite = np.argsort(-scores)[:n_elite]
+            mean = np.mean([cands[i] for i in elite], axis=0)
+            sig = np.maximum(np.std([cands[i] for i in elite], axis=0), 0.01 * (hi - lo))
+            print(
+                f"iteration {it}: best {scores.max():.2f} (mean-gain candidate "
+                f"{scores[0]:.2f}), best so far {best[0]:.2f}",
+                flush=True,
+            )
+            (a.out / "best_gains.json").write_text(json.dumps(best[1], indent=1) + "\n")
+            header = ["iteration", "score", *[f"start{i}" for i in range(len(STARTS))], *names]
+            np.savetxt(
+                a.out / "history.csv",
+                np.array(rows),
+                delimiter=",",
+                header=",".join(header),
+                comments="",
+            )
+    print(f"best score {best[0]:.2f}; gains in {a.out / 'best_gains.json'}")
+
+
+if __name__ == "__main__":
+    main()
