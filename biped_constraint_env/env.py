@@ -34,6 +34,12 @@ TORQUE_LIMIT_NM = 150.0
 NOMINAL_POSTURE_RAD = (0.0, -0.1, 0.1, -0.3, -0.4, 0.7)
 """Nominal model-1 posture q (theta0, q1..q5) [rad]: stance leg upright, swing leg back and
 bent, swing foot flat 0.41 m above the ground; at rest both ends of the stance foot push."""
+MIDSTRIDE_RATE_RANGE_RAD_S = (-1.1, -0.9)
+"""Range of the stance foot's turning rate about the toe at a mid-stride start [rad/s]."""
+MIDSTRIDE_THETA0_RANGE_RAD = (-0.25, -0.15)
+"""Range of the stance foot's heel-up angle theta0 at a mid-stride start [rad]."""
+STARTS = ("rest", "midstride")
+"""Values of the env's ``start`` argument."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 POSITION_TOLERANCE_M = 1e-9
@@ -185,15 +191,58 @@ def sample_initial_q(
     return q
 
 
-def start_sampled(
-    params: BipedParams, options: SimOptions, sim: SimArrays, idx: np.ndarray
-) -> None:
-    """Put slots ``idx`` (q already sampled) at rest in model 1, leg A standing, toe at y = 0.
+def midstride_start(
+    rate: float = -1.0, theta0: float = -0.2, lean: float = 0.1
+) -> tuple[np.ndarray, np.ndarray]:
+    """(q, qd) of a model-2 state in mid-stride, leg A on its toe, turning at ``rate`` [rad/s].
 
-    Raises ValueError if a sampled posture puts a point below the ground.
+    The stance heel is up by -theta0 [rad] (theta0 <= 0), the stance leg leans forward by
+    ``lean`` [rad] with its knee bent 0.05 rad, the swing leg is behind (thigh 0.3 rad back,
+    knee bent 0.6 rad, foot level), and the whole body turns forward about the stance toe at
+    ``rate`` (< 0: forward) with the swing thigh keeping its direction.
     """
-    sim.qd[idx] = 0.0
-    sim.ist[idx] = (int(Mode.FOOT_FLAT), 0, 0, 0)
+    if not (np.isfinite(rate) and np.isfinite(theta0) and np.isfinite(lean)) or theta0 > 0:
+        raise ValueError(f"need finite rate, lean and theta0 <= 0, got {rate}, {theta0}, {lean}")
+    q1 = -lean - theta0
+    q2, sw, q4 = 0.05, -0.3, -0.6
+    q3 = sw - (theta0 + q1 + q2)
+    q = np.array([theta0, q1, q2, q3, q4, -(sw + q4)])
+    return q, np.array([rate, 0.0, 0.0, -rate, 0.0, 0.0])
+
+
+def sample_start(
+    rng: np.random.Generator, start: str, posture: np.ndarray, noise_scale: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """(q, qd, mode) of a sampled episode start (``start`` in :data:`STARTS`).
+
+    "rest": ``posture`` at rest in model 1; "midstride": :func:`midstride_start` with the rate
+    and theta0 drawn uniformly from :data:`MIDSTRIDE_RATE_RANGE_RAD_S` and
+    :data:`MIDSTRIDE_THETA0_RANGE_RAD`, in model 2. Both add uniform noise in
+    [-noise_scale, noise_scale] to q1..q5 [rad].
+    """
+    if start == "rest":
+        return sample_initial_q(rng, posture, noise_scale), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
+    rate = rng.uniform(*MIDSTRIDE_RATE_RANGE_RAD_S)
+    theta0 = rng.uniform(*MIDSTRIDE_THETA0_RANGE_RAD)
+    q, qd = midstride_start(rate, theta0)
+    q[1:] += rng.uniform(-noise_scale, noise_scale, size=N_LINKS - 1)
+    return q, qd, int(Mode.TOE_PIVOT)
+
+
+def start_sampled(
+    params: BipedParams,
+    options: SimOptions,
+    sim: SimArrays,
+    idx: np.ndarray,
+    modes: np.ndarray | None = None,
+) -> None:
+    """Start slots ``idx`` (q and qd already sampled) in ``modes`` (default: model 1).
+
+    Leg A stands, its toe at y = 0. Raises ValueError if a sampled posture puts a point below
+    the ground.
+    """
+    sim.ist[idx] = 0
+    sim.ist[idx, 0] = int(Mode.FOOT_FLAT) if modes is None else modes
     sim.fst[idx] = 0.0
     chs, scs = params.packed
     iopt, fopt, _, _ = options.packed
@@ -382,6 +431,10 @@ class ConstrainedBipedEnv(gym.Env):
     Model 1, leg A standing, stance toe at y = 0, at rest, with
     ``q = NOMINAL_POSTURE_RAD = (0, -0.1, 0.1, -0.3, -0.4, 0.7)`` rad plus uniform noise in
     ``[-reset_noise_scale, reset_noise_scale]`` (default 0.01 rad) on q1..q5.
+    With ``start="midstride"`` (v2): model 2, leg A on its toe, turning forward about it:
+    :func:`midstride_start` with the rate uniform in ``MIDSTRIDE_RATE_RANGE_RAD_S`` (-1.1 to
+    -0.9 rad/s), the heel-up angle theta0 uniform in ``MIDSTRIDE_THETA0_RANGE_RAD`` (-0.25 to
+    -0.15 rad), and the same noise on q1..q5.
     ``reset(options={"q": ..., "qd": ..., "mode": ..., "stance_side": ..., "root_y": ...})``
     starts from any state in MODEL.md's coordinates (validated: points on or above the
     ground, model constraints satisfied; a ``ValueError`` says what is wrong).
@@ -418,10 +471,16 @@ class ConstrainedBipedEnv(gym.Env):
     | ctrl_cost_weight | float | 0.1 | per unit of sum((tau/limit)^2) | reward |
     | reset_noise_scale | float | 0.01 | uniform noise on q1..q5 [rad] | start |
     | fall_hip_height_m | float or None | None | end the episode when the hip is below [m] | end |
-    | posture | array (6,) | NOMINAL_POSTURE_RAD | nominal start posture [rad] | start |
+    | posture | array (6,) | NOMINAL_POSTURE_RAD | nominal start posture [rad] ("rest") | start |
+    | start | str | "rest" | "rest" (model 1 at rest) or "midstride" (model 2, moving) | start |
     | render_mode | str | None | "rgb_array" or "human" | render |
 
     ## Version History
+    * v2: the walking task. ``dt=0.005``, ``stop_at_switch=True`` (the torque changes at each
+      model switch, as in the paper), ``start="midstride"``, 6000 periods (30 s). Why: from
+      v1's start at rest the centre of mass lies over the stance heel with the swing leg behind
+      (no ankle torque can push it forward), and torques held through a switch act on other
+      joints after the renumbering; README, "Learning to walk further".
     * v1: default integrator RK4 x 16 substeps per 20 ms, chosen by the accuracy study
       (``preset="default"``).
     * v0: initial release; RK2 x 4 substeps per 20 ms (registered with ``preset="fast"``).
@@ -460,6 +519,7 @@ class ConstrainedBipedEnv(gym.Env):
         reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
         fall_hip_height_m: float | None = None,
         posture=NOMINAL_POSTURE_RAD,
+        start: str = "rest",
         render_mode: str | None = None,
     ):
         """Create the environment (see the class docstring, Arguments)."""
@@ -509,6 +569,9 @@ class ConstrainedBipedEnv(gym.Env):
             float(ctrl_cost_weight),
         )
         self.reset_noise_scale = float(reset_noise_scale)
+        if start not in STARTS:
+            raise ValueError(f"start must be one of {STARTS}, got {start!r}")
+        self.start = start
         if fall_hip_height_m is not None and not (
             isinstance(fall_hip_height_m, (int, float)) and np.isfinite(fall_hip_height_m)
         ):
@@ -548,8 +611,11 @@ class ConstrainedBipedEnv(gym.Env):
             forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
             self._sim.set(0, state, forces)
         else:
-            self._sim.q[0] = sample_initial_q(self.np_random, self.posture, self.reset_noise_scale)
-            start_sampled(self.params, self.options, self._sim, np.zeros(1, np.int64))
+            q, qd, mode = sample_start(
+                self.np_random, self.start, self.posture, self.reset_noise_scale
+            )
+            self._sim.q[0], self._sim.qd[0] = q, qd
+            start_sampled(self.params, self.options, self._sim, np.zeros(1, np.int64), mode)
         self._observe()
         info = self._info(events=(), terms=dict.fromkeys(REWARD_TERMS, 0.0), reason=None)
         if self.render_mode == "human":

@@ -30,7 +30,7 @@ from .env import (
     fallen,
     nb_observe,
     reward_terms,
-    sample_initial_q,
+    sample_start,
     start_sampled,
     state_from_options,
     validate_actions,
@@ -90,9 +90,12 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
         p = self._proto
         s = self._sim
-        for i in idx:
-            s.q[i] = sample_initial_q(self._rngs[i], p.posture, p.reset_noise_scale)
-        start_sampled(self.params, self.options, s, idx)
+        modes = np.empty(len(idx), np.int64)
+        for k, i in enumerate(idx):
+            s.q[i], s.qd[i], modes[k] = sample_start(
+                self._rngs[i], p.start, p.posture, p.reset_noise_scale
+            )
+        start_sampled(self.params, self.options, s, idx, modes)
         self._elapsed[idx] = 0
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):

@@ -238,3 +238,36 @@ def test_fall_termination_optional():
     assert te and info["termination_reason"] == "fall"
     with pytest.raises(ValueError, match="fall_hip_height_m"):
         ConstrainedBipedEnv(fall_hip_height_m=np.nan)
+
+
+def test_midstride_start_v2():
+    """v2 starts in model 2 from the documented ranges, moving forward; bad ``start`` raises."""
+    from biped_constraint_env.env import (
+        MIDSTRIDE_RATE_RANGE_RAD_S,
+        MIDSTRIDE_THETA0_RANGE_RAD,
+        check_start_state,
+        midstride_start,
+    )
+
+    env = gym.make("ConstrainedBiped-v2")
+    assert env.spec.max_episode_steps == 6000
+    u = env.unwrapped
+    assert u.dt == 0.005 and u.options.stop_at_switch and u.start == "midstride"
+    rates = []
+    for seed in range(20):
+        obs, info = env.reset(seed=seed)
+        st = u.state
+        assert info["mode"] == 2 and st.mode == Mode.TOE_PIVOT
+        lo, hi = MIDSTRIDE_THETA0_RANGE_RAD
+        assert lo <= st.q[0] <= hi
+        rates.append(st.qd[0])
+        check_start_state(u.params, st)
+        assert obs[OBS_NAMES.index("hip_vy")] > 0  # moving forward
+    lo, hi = MIDSTRIDE_RATE_RANGE_RAD_S
+    assert lo <= min(rates) < max(rates) <= hi
+    q, qd = midstride_start(-1.0, -0.2)
+    assert qd[0] == -1.0 and qd[3] == 1.0 and q[0] == -0.2
+    with pytest.raises(ValueError, match="start"):
+        ConstrainedBipedEnv(start="running")
+    with pytest.raises(ValueError):
+        midstride_start(-1.0, 0.1)

@@ -56,14 +56,28 @@ def test_torques_keep_the_contacts_pushing_at_the_sample():
         assert not term
 
 
-def test_documented_midstride_walk():
-    """README: from the mid-stride start at -1 rad/s, 6 complete strict steps, then the stance
-    heel comes down in model 2 (out of the paper's four models)."""
-    env = _env()
+def test_documented_walk_on_v2():
+    """README: on ConstrainedBiped-v2 (strict physics) reset seed 0 walks on; 20 complete
+    steps here (the README's 30 s episodes reach 30-31 steps)."""
+    import gymnasium as gym
+
+    env = gym.make("ConstrainedBiped-v2").unwrapped
+    assert env.options.strict
     ctl = ModelController(params=env.params, options=env.options)
-    steps, dist, reason, _ = run_episode(env, ctl, _start(-1.0), max_periods=4000)
-    assert (steps, reason) == (6, "stance_heel_down")
-    assert dist == pytest.approx(7.62, abs=0.01)
+    steps, dist, reason, t = run_episode(env, ctl, seed=0, cap=20)
+    assert (steps, reason) == (20, None)
+    assert 20.0 < dist < 25.0 and t < 20.0  # about 1.1 m and 0.95 s per step
+
+
+def test_tune_script_smoke(tmp_path):
+    from training.tune_model_controller import main
+
+    main(
+        ["--iterations", "1", "--population", "4", "--cap", "1", "--starts", "2"]
+        + ["--out", str(tmp_path)]
+    )
+    assert (tmp_path / "best_gains.json").exists()
+    assert len((tmp_path / "history.csv").read_text().splitlines()) == 1 + 4
 
 
 def test_unknown_gain_raises():

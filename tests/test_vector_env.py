@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
+from biped_constraint_env.env import OBS_NAMES
 
 ENV_ID = "ConstrainedBiped-v1"
 
@@ -91,8 +92,17 @@ def test_fall_termination_same_in_batched_and_single():
     assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
 
 
-def _run_kw(mode, kw, steps=60, seed=3):
-    ve = gym.make_vec(ENV_ID, vectorization_mode=mode, **kw)
+def test_midstride_start_same_in_batched_and_single():
+    """v2 (mid-stride start, 5 ms, stop at switches): the batched env equals the single envs."""
+    kw = dict(num_envs=3)
+    ob, rb, tb = _run_kw("vector_entry_point", kw, steps=150, env_id="ConstrainedBiped-v2")
+    os_, rs, ts = _run_kw("sync", kw, steps=150, env_id="ConstrainedBiped-v2")
+    assert np.all(ob[0, :, OBS_NAMES.index("mode_2")] == 1.0)  # every slot starts in model 2
+    assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
+
+
+def _run_kw(mode, kw, steps=60, seed=3, env_id=ENV_ID):
+    ve = gym.make_vec(env_id, vectorization_mode=mode, **kw)
     obs, _ = ve.reset(seed=seed)
     rng = np.random.default_rng(0)
     obs_seq, R, T = [obs], [], []

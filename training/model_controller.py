@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_constraint_env.env import OBS_NAMES, TORQUE_LIMIT_NM
+from biped_constraint_env.env import OBS_NAMES, TORQUE_LIMIT_NM, midstride_start
 from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode
@@ -70,35 +70,35 @@ _C0 = np.zeros(6)  # the swing foot pitch phi5 is the sum plus 2 pi
 START_POSTURE = (-0.3, -0.4, 0.7)  # q3..q5 held in model 1 before the first heel lift [rad]
 
 DEFAULT_GAINS: dict[str, float] = {
-    "kp": 100.0,  # output PD [1/s^2]
-    "kd": 18.5,  # [1/s]
-    "emax": 0.59,  # error clip [rad]
-    "land": 0.38,  # swing-thigh landing angle [rad]
-    "fb_v": 0.0,  # landing angle per m/s of hip speed above v_des [rad s/m]
-    "v_des": 1.0,  # [m/s]
-    "fb_y": 0.0,  # landing angle per m of hip ahead of the stance toe [rad/m]
-    "blend": 0.157,  # knee extends over this last part of the thigh's swing [rad]
-    "flex": 0.76,  # swing knee flexion [rad]
-    "knee_land": 0.048,  # swing knee flexion at landing [rad]
-    "foot_up": 0.255,  # swing foot pitch, toe up [rad]
-    "sk": 0.0755,  # stance knee in models 2 and 3 [rad]
-    "sk1": 0.0755,  # stance knee in models 1 and 4 [rad]
-    "hy_lift": 0.11,  # hip ahead of the stance toe at which the heel is unloaded [m]
-    "hy_swing": 0.11,  # hip ahead of the stance toe at which the swing leg swings [m]
-    "heel_f": -5.3,  # heel force target when unloading it [N]
-    "toe_lift_f": -21.4,  # old-toe force target in model 4 [N]
-    "kp3": 23.4,  # swing foot rotation in model 3 [1/s^2]
-    "kd3": 5.56,  # [1/s]
-    "fmin": 8.8,  # least push of a contact that must push [N]
-    "zc": 0.0557,  # clearance of the trailing foot [m]
+    "kp": 103.5,  # output PD [1/s^2]
+    "kd": 18.96,  # [1/s]
+    "emax": 0.5338,  # error clip [rad]
+    "land": 0.3642,  # swing-thigh landing angle [rad]
+    "fb_v": 0.02856,  # landing angle per m/s of hip speed above v_des [rad s/m]
+    "v_des": 1.005,  # [m/s]
+    "fb_y": -0.01527,  # landing angle per m of hip ahead of the stance toe [rad/m]
+    "blend": 0.1615,  # knee extends over this last part of the thigh's swing [rad]
+    "flex": 0.7626,  # swing knee flexion [rad]
+    "knee_land": 0.02796,  # swing knee flexion at landing [rad]
+    "foot_up": 0.2538,  # swing foot pitch, toe up [rad]
+    "sk": 0.07281,  # stance knee in models 2 and 3 [rad]
+    "sk1": 0.06132,  # stance knee in models 1 and 4 [rad]
+    "hy_lift": 0.1133,  # hip ahead of the stance toe at which the heel is unloaded [m]
+    "hy_swing": -0.03089,  # hip ahead of the stance toe at which the swing leg swings [m]
+    "heel_f": -6.937,  # heel force target when unloading it [N]
+    "toe_lift_f": -15.44,  # old-toe force target in model 4 [N]
+    "kp3": 30.22,  # swing foot rotation in model 3 [1/s^2]
+    "kd3": 5.444,  # [1/s]
+    "fmin": 9.216,  # least push of a contact that must push [N]
+    "zc": 0.05894,  # clearance of the trailing foot [m]
     "kpz": 100.0,  # clearance PD [1/s^2]
     "kdz": 20.0,  # [1/s]
-    "clear_y": 0.155,  # clearance applies while the swing ankle is behind stance toe + this [m]
-    "v1": 0.0,  # model-1 hip-speed target [m/s] for the stance ankle (0: push, heel loaded)
-    "kv": 5.0,  # hip-speed feedback gain in model 1 [1/s]
-    "lift_dv": 0.0,  # heel lift delayed by this per m/s of hip speed below v1 [m s/m]
+    "clear_y": 0.1576,  # clearance applies while the swing ankle is behind stance toe + this [m]
+    "v1": 2.415,  # model-1 hip-speed target [m/s] for the stance ankle (0: push, heel loaded)
+    "kv": 4.931,  # hip-speed feedback gain in model 1 [1/s]
+    "lift_dv": 0.02119,  # heel lift delayed by this per m/s of hip speed below v1 [m s/m]
     "w_force": 1.0,  # weight of the force-target rows
-    "reg": 1e-4,  # Tikhonov regularisation of the torques
+    "reg": 0.0001,  # Tikhonov regularisation of the torques
 }
 
 
@@ -275,25 +275,21 @@ class ModelController:
 
 
 def midstride_state(rate: float = -1.0, theta0: float = -0.2, lean: float = 0.1) -> SimState:
-    """A model-2 start state, turning about the stance toe at ``rate`` [rad/s] (< 0: forward).
+    """The model-2 state of :func:`biped_constraint_env.env.midstride_start` (v2's start)."""
+    q, qd = midstride_start(rate, theta0, lean)
+    return SimState(0.0, Mode.TOE_PIVOT, 0, q, qd)
 
-    The heel is up by -theta0 [rad], the body leans forward by ``lean`` [rad], and the swing
-    leg is behind with its knee flexed.
+
+def run_episode(env, controller, options=None, seed=None, max_periods=20_000, cap=0):
+    """Run one episode (at most ``max_periods``; ``cap`` > 0 stops it at that many steps).
+
+    Returns (steps, hip travel [m], termination reason or None, sim time [s]).
     """
-    q1 = -lean - theta0
-    q2, sw, q4 = 0.05, -0.3, -0.6
-    q3 = sw - (theta0 + q1 + q2)
-    q = np.array([theta0, q1, q2, q3, q4, -(sw + q4)])
-    return SimState(0.0, Mode.TOE_PIVOT, 0, q, np.array([rate, 0.0, 0.0, -rate, 0.0, 0.0]))
-
-
-def run_episode(env, controller, options=None, seed=None, max_periods=20_000):
-    """Run one episode; returns (steps, hip travel [m], termination reason, sim time [s])."""
     obs, info = env.reset(seed=seed, options=options)
     y0 = info["hip_y"]
     for _ in range(max_periods):
         obs, _, terminated, truncated, info = env.step(controller(obs))
-        if terminated or truncated:
+        if terminated or truncated or 0 < cap <= info["steps_completed"]:
             break
     return info["steps_completed"], info["hip_y"] - y0, info["termination_reason"], info["t"]
 
@@ -313,8 +309,13 @@ def main(argv: list[str] | None = None) -> None:
         default=[-1.0],
         help="mid-stride start rates about the stance toe [rad/s]",
     )
-    ap.add_argument("--rest", action="store_true", help="start at rest (env reset) instead")
-    ap.add_argument("--seeds", type=int, default=10, help="reset seeds with --rest")
+    ap.add_argument(
+        "--start",
+        choices=("rest", "midstride"),
+        help="run seeded env resets of this kind (v1's rest, v2's mid-stride) instead of --rates",
+    )
+    ap.add_argument("--seeds", type=int, default=10, help="reset seeds 0..N-1 with --start")
+    ap.add_argument("--cap", type=int, default=0, help="stop an episode at this many steps (0: no)")
     ap.add_argument(
         "--hold",
         action="store_true",
@@ -323,12 +324,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--gains", type=Path, help="JSON {name: value} overriding the defaults")
     a = ap.parse_args(argv)
     gains = json.loads(a.gains.read_text()) if a.gains else None
-    env = ConstrainedBipedEnv(preset=a.preset, dt=a.dt, stop_at_switch=not a.hold)
+    env = ConstrainedBipedEnv(
+        preset=a.preset, dt=a.dt, stop_at_switch=not a.hold, start=a.start or "rest"
+    )
     ctl = ModelController(gains, env.params, env.options)
-    n = int(a.seconds / a.dt) * 2
+    n = int(round(a.seconds / a.dt))
     runs = (
         [(f"seed {s}", None, s) for s in range(a.seeds)]
-        if a.rest
+        if a.start
         else [
             (
                 f"rate {r:+.2f} rad/s",
@@ -338,9 +341,16 @@ def main(argv: list[str] | None = None) -> None:
             for r in a.rates
         ]
     )
+    results = []
     for name, opts, seed in runs:
-        steps, dist, reason, t = run_episode(env, ctl, opts, seed, n)
+        steps, dist, reason, t = run_episode(env, ctl, opts, seed, n, a.cap)
+        results.append((steps, dist))
         print(f"{name}: {steps} steps, {dist:.2f} m in {t:.2f} s, ended by {reason}", flush=True)
+    st, d = np.array(results).T
+    print(
+        f"{len(results)} episodes: steps mean {st.mean():.1f} std {st.std():.1f} "
+        f"min {st.min():.0f}; distance mean {d.mean():.2f} m"
+    )
 
 
 if __name__ == "__main__":

@@ -40,6 +40,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "sk": (0.0, 0.2),
     "sk1": (0.0, 0.6),
     "hy_lift": (-0.05, 0.25),
+    "hy_swing": (-0.35, 0.1),
     "heel_f": (-20.0, 0.0),
     "toe_lift_f": (-40.0, -5.0),
     "kp3": (10.0, 50.0),
@@ -54,14 +55,16 @@ BOUNDS: dict[str, tuple[float, float]] = {
 """The tuned gains and their search ranges (units as in DEFAULT_GAINS)."""
 
 STARTS: tuple[tuple[float, float], ...] = (
-    (-0.8, -0.2),
+    (-0.85, -0.2),
     (-0.9, -0.2),
     (-1.0, -0.2),
+    (-1.05, -0.2),
     (-1.1, -0.2),
-    (-1.2, -0.2),
-    (-1.0, -0.15),
-    (-1.0, -0.25),
-    (-0.95, -0.22),
+    (-1.15, -0.2),
+    (-0.9, -0.15),
+    (-1.05, -0.25),
+    (-1.1, -0.15),
+    (-0.95, -0.25),
 )
 """(rate [rad/s], theta0 [rad]) of :func:`midstride_state` for every scored start."""
 
@@ -102,10 +105,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--sigma", type=float, default=0.15, help="initial spread / range width")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--starts", type=int, default=len(STARTS), help="score the first N starts")
     ap.add_argument("--out", type=Path, default=Path("results/tune_mc"))
     a = ap.parse_args(argv)
     if a.iterations < 1 or a.population < 4 or a.cap < 1 or a.workers < 1 or a.sigma <= 0:
         ap.error("need iterations >= 1, population >= 4, cap >= 1, workers >= 1, sigma > 0")
+    if not 1 <= a.starts <= len(STARTS):
+        ap.error(f"--starts must be in 1..{len(STARTS)}")
+    starts = STARTS[: a.starts]
     init = {**DEFAULT_GAINS, **(json.loads(a.init.read_text()) if a.init else {})}
     names = list(BOUNDS)
     lo = np.array([BOUNDS[n][0] for n in names])
@@ -124,9 +131,9 @@ def main(argv: list[str] | None = None) -> None:
                 for _ in range(a.population - 1)
             ]
             gains = [{**init, **dict(zip(names, map(float, c), strict=True))} for c in cands]
-            jobs = [(g, r, th, a.cap) for g in gains for r, th in STARTS]
+            jobs = [(g, r, th, a.cap) for g in gains for r, th in starts]
             res = pool.map(_job, jobs, chunksize=1)
-            per = [res[i * len(STARTS) : (i + 1) * len(STARTS)] for i in range(len(cands))]
+            per = [res[i * len(starts) : (i + 1) * len(starts)] for i in range(len(cands))]
             scores = np.array([score(r) for r in per])
             for g, r, sc in zip(gains, per, scores, strict=True):
                 rows.append([it, sc, *[x[0] for x in r], *[g[n] for n in names]])
@@ -141,7 +148,7 @@ def main(argv: list[str] | None = None) -> None:
                 flush=True,
             )
             (a.out / "best_gains.json").write_text(json.dumps(best[1], indent=1) + "\n")
-            header = ["iteration", "score", *[f"start{i}" for i in range(len(STARTS))], *names]
+            header = ["iteration", "score", *[f"start{i}" for i in range(len(starts))], *names]
             np.savetxt(
                 a.out / "history.csv",
                 np.array(rows),
