@@ -83,3 +83,32 @@ def test_tune_script_smoke(tmp_path):
 def test_unknown_gain_raises():
     with pytest.raises(ValueError, match="unknown gains"):
         ModelController({"kpp": 1.0})
+
+
+def test_residual_is_projected_onto_the_constraints():
+    """A residual moves the torques, but never so far that a contact pulls at the sample."""
+    from training.fsm_controller import action_map_from
+
+    env = _env()
+    ctl = ModelController(params=env.params, options=env.options)
+    obs, _ = env.reset(options=_start())
+    fmin = DEFAULT_GAINS["fmin"]
+    rng = np.random.default_rng(0)
+    moved = 0
+    for _ in range(40):
+        st = env.state
+        base = ctl(obs)
+        np.testing.assert_allclose(ctl(obs, residual=np.zeros(5)), base, atol=0.05)  # reg 1e-4
+        r = rng.uniform(-30.0, 30.0, 5)
+        tau = ctl(obs, residual=r)
+        _, forces, _ = evaluate(env.params, st, tau, env.options)
+        assert forces[0] >= fmin - 0.1
+        moved += np.abs(tau - base).max() > 1.0
+        obs, _, term, _, _ = env.step(base)
+        assert not term
+    assert moved > 30  # the residual does act
+    amap = action_map_from("model", 0.05, 150.0)  # the training config's spelling
+    a = np.full((1, 5), 0.5)
+    np.testing.assert_allclose(amap(a, obs[None]), ctl(obs[None], residual=3.75 * np.ones((1, 5))))
+    with pytest.raises(ValueError, match="residual"):
+        ctl(obs, residual=np.array([np.nan, 0, 0, 0, 0]))

@@ -2,11 +2,13 @@
 
     python -m training.evaluate RUN_DIR [--episodes 10] [--seed 0] [--which final|best]
 
-Runs N seeded episodes of ConstrainedBiped-v1 with its reset noise and the deterministic
+Runs N seeded episodes of the run's env (v1 or v2) with its reset noise and the deterministic
 policy; prints mean, std and min of completed walking steps and distance, the termination
 reasons, and a table that puts the policy next to the open-loop baselines; writes
 ``evaluation.json``, ``figures/best.gif``, ``figures/worst.gif`` and Fig. 6-style strips of the
-best and the worst episode into RUN_DIR (``RUN_DIR/evaluation/`` if it is the committed policy).
+best and the worst episode into RUN_DIR (or ``--out``). With a base controller it also runs
+the base alone (zero residual) on the same seeds, for comparison. The committed policy is the
+run directory ``policies/ppo_model_residual``.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ def load(run: Path, which: str):
     cfg = parse_config(PPOConfig, ["--config", str(run / "config.toml")], "")
     where = run if which == "final" else run / which
     model = PPO.load(where / "model.zip", device="cpu")
-    dummy = make_sb3_vec_env(1, 0, cfg.env_kwargs(), "dummy")
+    dummy = make_sb3_vec_env(1, 0, cfg.env_kwargs(), "dummy", cfg.env_id)
     vecnorm = VecNormalize.load(str(where / "vecnormalize.pkl"), dummy)
     vecnorm.training = False
     vecnorm.norm_reward = False
@@ -90,6 +92,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         def record(env, ep, frames=frames, images=images):
             u = env.unwrapped
+            # one frame per 20 ms of simulated time (real-time GIF at 50 fps, whatever dt)
+            if frames and u.state.t < frames[-1]["t"] + 0.02 - 1e-9:
+                return
             frames.append({"t": u.state.t, "keypoints": u.keypoints()})
             if len(images) < GIF_MAX_FRAMES:
                 images.append(env.render())
@@ -116,6 +121,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         "which": args.which,
         "baselines": baselines(),
     }
+    if cfg.base_controller:  # the base controller alone on the same seeds
+        base = evaluate_policy_episodes(None, None, cfg, args.episodes, args.seed)
+        bs = np.array([e["steps_completed"] for e in base], dtype=float)
+        bd = np.array([e["distance_m"] for e in base])
+        summary["base_alone"] = {
+            "controller": cfg.base_controller,
+            "steps_mean": bs.mean(),
+            "steps_std": bs.std(),
+            "steps_min": int(bs.min()),
+            "distance_mean_m": bd.mean(),
+            "distance_std_m": bd.std(),
+            "ends": dict(Counter(e["end"] for e in base)),
+        }
     (out_dir / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
     print("| controller | completed steps (mean ± std, min) | distance [m] (mean ± std) | ends |")
     print("|---|---|---|---|")
@@ -123,6 +141,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"| PPO ({args.episodes} seeded episodes) | {steps.mean():.1f} ± {steps.std():.1f}, "
         f"min {int(steps.min())} | {dist.mean():.2f} ± {dist.std():.2f} | {dict(reasons)} |"
     )
+    if "base_alone" in summary:
+        b = summary["base_alone"]
+        print(
+            f"| base controller alone ({b['controller']}) | {b['steps_mean']:.1f} ± "
+            f"{b['steps_std']:.1f}, min {b['steps_min']} | {b['distance_mean_m']:.2f} ± "
+            f"{b['distance_std_m']:.2f} | {b['ends']} |"
+        )
     for b in summary["baselines"]:
         print(
             f"| {b['controller']} (open loop) | {b['steps_completed']} | {b['distance_m']:.2f} | "

@@ -165,7 +165,7 @@ class ActionMap:
         """Map actions to torques, on top of ``base`` if given.
 
         ``base``: this controller's parameters (N_PARAMS,), another controller (a callable
-        mapping observations (n, 24) to torques (n, 5), e.g.
+        ``base(obs (n, 24), residual=(n, 5))`` returning torques (n, 5), e.g.
         :class:`training.model_controller.ModelController`), or None. ``residual_scale``: the
         residual bound as a fraction of ``limit``, in (0, 1].
         """
@@ -185,8 +185,10 @@ class ActionMap:
         if self.base is None:
             return a * self.limit
         obs = np.asarray(obs, dtype=np.float64)
-        b = self.base(obs) if callable(self.base) else torques(self.base, obs, self.limit)
-        tau = b + self.residual_scale * self.limit * a
+        r = self.residual_scale * self.limit * a
+        if callable(self.base):  # the controller adds the residual itself (and may project it)
+            return np.clip(self.base(obs, residual=r), -self.limit, self.limit)
+        tau = torques(self.base, obs, self.limit) + r
         return np.clip(tau, -self.limit, self.limit)
 
 

@@ -143,12 +143,19 @@ class ModelController:
         self.options = options
         self.limit = float(limit)
 
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        """Torques for one observation (24,) or a batch (n, 24) -> (5,) or (n, 5)."""
+    def __call__(self, obs: np.ndarray, residual: np.ndarray | None = None) -> np.ndarray:
+        """Torques for one observation (24,) or a batch (n, 24) -> (5,) or (n, 5).
+
+        ``residual`` [N m] (same leading shape, (5,) or (n, 5)): added to the controller's
+        torques and the sum projected back onto its constraints (see :meth:`torques`).
+        """
         obs = np.asarray(obs, dtype=np.float64)
         if obs.ndim == 2:
-            return np.stack([self.torques(state_from_obs(o)) for o in obs])
-        return self.torques(state_from_obs(obs))
+            res = [None] * len(obs) if residual is None else np.asarray(residual, np.float64)
+            return np.stack(
+                [self.torques(state_from_obs(o), r) for o, r in zip(obs, res, strict=True)]
+            )
+        return self.torques(state_from_obs(obs), residual)
 
     # ------------------------------------------------------------------ model queries
     def _affine(self, state: SimState):
@@ -178,8 +185,14 @@ class ModelController:
         return kin[axis], J, kin[4 + axis]
 
     # ------------------------------------------------------------------ the law
-    def torques(self, state: SimState) -> np.ndarray:
-        """Torques [N m] (5,) for a simulator state."""
+    def torques(self, state: SimState, residual: np.ndarray | None = None) -> np.ndarray:
+        """Torques [N m] (5,) for a simulator state.
+
+        With ``residual`` (5,) [N m] (a learned correction): the torques nearest to the
+        controller's plus the residual that still satisfy the inequality constraints (contacts
+        pushing by ``fmin``, the trailing foot's clearance, the torque limits) at the sample, a
+        safety projection.
+        """
         g = self.g
         m = int(state.mode)
         q, qd = state.q, state.qd
@@ -257,6 +270,17 @@ class ModelController:
             e = np.zeros(5)
             e[i] = 1.0
             ineq += [(e, 0.0, -self.limit), (-e, 0.0, -self.limit)]
+        tau = self._solve(rows, ineq)
+        if residual is not None:
+            r = np.asarray(residual, dtype=np.float64)
+            if r.shape != (5,) or not np.all(np.isfinite(r)):
+                raise ValueError(f"residual must be 5 finite torques, got {r!r}")
+            target = tau + r
+            tau = self._solve([(1.0, e, t) for e, t in zip(np.eye(5), target, strict=True)], ineq)
+        return np.clip(tau, -self.limit, self.limit)
+
+    def _solve(self, rows, ineq) -> np.ndarray:
+        """Weighted least squares over the rows; violated inequalities join as rows of 1e3."""
         active: list[int] = []
         for _ in range(8):
             rr = rows + [(1e3, ineq[i][0], ineq[i][2] - ineq[i][1]) for i in active]
@@ -264,14 +288,14 @@ class ModelController:
             R = np.array([r[1] for r in rr])
             t = np.array([r[2] for r in rr])
             tau = np.linalg.solve(
-                (R * w[:, None]).T @ R + g["reg"] * np.eye(5), (R * w[:, None]).T @ t
+                (R * w[:, None]).T @ R + self.g["reg"] * np.eye(5), (R * w[:, None]).T @ t
             )
             slack = [(c[0] @ tau + c[1] - c[2], i) for i, c in enumerate(ineq) if i not in active]
             worst = min(slack, default=(0.0, -1))
             if worst[0] >= -1e-6:
                 break
             active.append(worst[1])
-        return np.clip(tau, -self.limit, self.limit)
+        return tau
 
 
 def midstride_state(rate: float = -1.0, theta0: float = -0.2, lean: float = 0.1) -> SimState:

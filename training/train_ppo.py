@@ -90,7 +90,8 @@ def evaluate_policy_episodes(
 ) -> list[dict]:
     """Run ``n`` seeded episodes of the single env; per episode: steps, distance, reason, return.
 
-    ``record(env, episode_index)`` is called before every step if given (frames for figures).
+    ``model=None`` runs the base controller alone (zero residual). ``record(env,
+    episode_index)`` is called before every step if given (frames for figures).
     """
     import gymnasium as gym
 
@@ -106,7 +107,10 @@ def evaluate_policy_episodes(
             if record:
                 record(env, ep)
             o = vecnorm.normalize_obs(obs[None, :].astype(np.float32)) if vecnorm else obs[None, :]
-            action, _ = model.predict(o, deterministic=deterministic)
+            if model is None:
+                action = np.zeros((1, 5))
+            else:
+                action, _ = model.predict(o, deterministic=deterministic)
             obs, r, term, trunc, info = env.step(amap(action, obs[None, :])[0])
             ret += r
             done = term or trunc
