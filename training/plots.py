@@ -122,8 +122,9 @@ def learning_curve(run: Path, path: Path) -> None:
         with open(run / "eval.csv") as fh:
             ev = list(csv.DictReader(fh))
         ex = [int(r["env_steps"]) for r in ev]
-        axes[0].plot(ex, [float(r["steps_mean"]) for r in ev], "o-", label="evaluation (10 seeds)")
-        axes[1].plot(ex, [float(r["return_mean"]) for r in ev], "o-", label="evaluation (10 seeds)")
+        lab = "evaluation (deterministic policy, seeded episodes)"
+        axes[0].plot(ex, [float(r["steps_mean"]) for r in ev], "o-", label=lab)
+        axes[1].plot(ex, [float(r["return_mean"]) for r in ev], "o-", label=lab)
     axes[0].set_ylabel("completed walking steps per episode")
     axes[1].set_ylabel("return")
     for ax in axes:
