@@ -39,7 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_constraint_env.env import OBS_NAMES, TORQUE_LIMIT_NM, midstride_start
+from biped_constraint_env.env import (
+    NOMINAL_POSTURE_RAD,
+    OBS_NAMES,
+    TORQUE_LIMIT_NM,
+    midstride_start,
+)
 from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode
@@ -67,7 +72,7 @@ _C = np.array(
     dtype=np.float64,
 )
 _C0 = np.zeros(6)  # the swing foot pitch phi5 is the sum plus 2 pi
-START_POSTURE = (-0.3, -0.4, 0.7)  # q3..q5 held in model 1 before the first heel lift [rad]
+START_POSTURE = NOMINAL_POSTURE_RAD[3:]  # q3..q5 held in model 1 before the swing [rad]
 
 DEFAULT_GAINS: dict[str, float] = {
     "kp": 103.5,  # output PD [1/s^2]
@@ -359,7 +364,7 @@ def main(argv: list[str] | None = None) -> None:
         else [
             (
                 f"rate {r:+.2f} rad/s",
-                dict(q=midstride_state(r).q, qd=midstride_state(r).qd, mode=2),
+                dict(zip(("q", "qd"), midstride_start(r), strict=True), mode=2),
                 None,
             )
             for r in a.rates

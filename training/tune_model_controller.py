@@ -23,7 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from training.common import progress
-from training.model_controller import DEFAULT_GAINS, ModelController, midstride_state
+from training.model_controller import (
+    DEFAULT_GAINS,
+    ModelController,
+    midstride_state,
+    run_episode,
+)
 
 BOUNDS: dict[str, tuple[float, float]] = {
     "kp": (60.0, 160.0),
@@ -76,13 +81,9 @@ def run_start(gains: dict[str, float], rate: float, theta0: float, cap: int, dt:
     env = ConstrainedBipedEnv(dt=dt, stop_at_switch=True)
     ctl = ModelController(gains, env.params, env.options)
     s = midstride_state(rate, theta0)
-    obs, info = env.reset(options=dict(q=s.q, qd=s.qd, mode=2))
-    y0 = info["hip_y"]
-    for _ in range(int(60.0 / dt)):
-        obs, _, terminated, truncated, info = env.step(ctl(obs))
-        if terminated or truncated or info["steps_completed"] >= cap:
-            break
-    return info["steps_completed"], info["hip_y"] - y0, info["termination_reason"]
+    opts = dict(q=s.q, qd=s.qd, mode=2)
+    steps, dist, reason, _ = run_episode(env, ctl, opts, max_periods=int(60.0 / dt), cap=cap)
+    return steps, dist, reason
 
 
 def _job(args):
