@@ -241,6 +241,25 @@ def start_sampled(
     Leg A stands, its toe at y = 0. Raises ValueError if a sampled posture puts a point below
     the ground.
     """
+    low = start_slots(params, options, sim, idx, modes)
+    if np.any(low < -POSITION_TOLERANCE_M):
+        raise ValueError(
+            f"a sampled start posture is below the ground (lowest z {low.min():.3g} m); "
+            "reduce reset_noise_scale or change the posture"
+        )
+
+
+def start_slots(
+    params: BipedParams,
+    options: SimOptions,
+    sim: SimArrays,
+    idx: np.ndarray,
+    modes: np.ndarray | None = None,
+) -> np.ndarray:
+    """Start slots ``idx`` as :func:`start_sampled` does; returns each one's lowest point z [m].
+
+    For searches that score a start below the ground instead of refusing it.
+    """
     sim.ist[idx] = 0
     sim.ist[idx, 0] = int(Mode.FOOT_FLAT) if modes is None else modes
     sim.fst[idx] = 0.0
@@ -260,11 +279,7 @@ def start_sampled(
         iopt,
         fopt,
     )
-    if np.any(low < -POSITION_TOLERANCE_M):
-        raise ValueError(
-            f"a sampled start posture is below the ground (lowest z {low.min():.3g} m); "
-            "reduce reset_noise_scale or change the posture"
-        )
+    return low
 
 
 def state_from_options(options: dict[str, Any]) -> SimState:

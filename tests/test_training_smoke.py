@@ -37,6 +37,52 @@ def test_open_loop_config_file_and_flags(tmp_path):
     assert cfg.preset == "default" and cfg.dt == 0.004 and cfg.signs == (1, -1, 1, -1, 1)
 
 
+def test_open_loop_noisy_starts_use_the_config_start():
+    """The noisy starts are the config's start plus the env's noise law, seed by seed."""
+    from biped_constraint_env.env import midstride_start
+
+    q, qd = midstride_start(-1.0, -0.2)
+    cfg = open_loop.OpenLoopConfig(
+        preset="default",
+        dt=0.02,
+        stop_at_switch=True,
+        max_periods=5,
+        gif=False,
+        progress=False,
+        torques=(0.0,) * 20,
+        posture=tuple(q),
+        velocity=tuple(qd),
+        mode=2,
+        noise_seeds=2,
+        noise=0.01,
+    )
+    exact = open_loop.run(cfg, record_frames=True)
+    first = exact["frames"][0]["keypoints"]
+    runs = open_loop.noisy_starts(cfg)
+    assert [r["seed"] for r in runs] == [0, 1]
+    again = open_loop.run(cfg, record_frames=True, reset_seed=0, noise=0.01)
+    moved = np.abs(again["frames"][0]["keypoints"]["hip"] - first["hip"]).max()
+    assert 0 < moved < 0.05  # noise of 0.01 rad on q1..q5 moves the hip, but only a little
+    assert again["steps_completed"] == runs[0]["steps_completed"]
+    with pytest.raises(ValueError, match="6 values"):
+        open_loop.run(open_loop.OpenLoopConfig(velocity=(1.0,), gif=False), record_frames=False)
+
+
+def test_optimize_open_loop_midstride_smoke(tmp_path):
+    from training import optimize_open_loop
+
+    args = ["--out-dir", str(tmp_path), "--start", "midstride", "--iterations", "2"]
+    args += ["--population", "16", "--restarts", "1", "--seconds", "0.5", "--progress", "false"]
+    assert optimize_open_loop.main(args) == 0
+    (run,) = (tmp_path / "optimize_open_loop").iterdir()
+    summary = json.loads((run / "summary.json").read_text())
+    assert len(summary["robustness_steps_10_seeds"]) == 10
+    cfg = open_loop.parse_config(
+        open_loop.OpenLoopConfig, ["--config", str(run / "best_open_loop.toml")], "x"
+    )
+    assert cfg.mode == 2 and cfg.stop_at_switch and len(cfg.velocity) == 6
+
+
 def test_sb3_ppo_learns_2048_steps(tmp_path):
     import torch
     from gymnasium.wrappers import RescaleAction
@@ -144,7 +190,8 @@ def test_table2_study_smoke(tmp_path):
 
 
 def test_optimised_table_documented_step_counts():
-    """README: 1 step with exact torque switching, 0 through the env (2 ms lag), strict physics."""
+    """README: 1 step with exact torque switching (simulator and env with stop_at_switch, 20 ms),
+    0 through the env when the torque is held to the end of a 2 ms period; strict physics."""
     import tomllib
     from pathlib import Path
 
@@ -163,7 +210,10 @@ def test_optimised_table_documented_step_counts():
             break
     assert st.steps_completed == 1
     cfg = open_loop.parse_config(open_loop.OpenLoopConfig, ["--config", str(path)], "x")
-    out = open_loop.run(
-        cfg.__class__(**{**cfg.__dict__, "gif": False, "progress": False}), record_frames=False
-    )
+    quiet = {**cfg.__dict__, "gif": False, "progress": False}
+    out = open_loop.run(cfg.__class__(**quiet), record_frames=False)
+    assert cfg.stop_at_switch and out["steps_completed"] == 1
+    assert out["distance_m"] < -0.9  # the one step goes backwards (README)
+    held = cfg.__class__(**{**quiet, "stop_at_switch": False, "dt": 0.002, "max_periods": 5000})
+    out = open_loop.run(held, record_frames=False)
     assert out["steps_completed"] == 0 and out["end_reason"] == "stance_toe_pulls"

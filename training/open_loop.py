@@ -6,7 +6,11 @@ The torque row of the *current* model is applied each control period. With the p
 (explicit Euler, switching at the 20 ms sample) the model changes only at a sample, so the
 torque changes at the switch itself, as in the paper. With the accurate default preset the
 switch is located inside the period; use a short control period (``--dt 0.002``) so that the
-torque follows the switch within 2 ms. Prints steps completed, distance, every model switch
+torque follows the switch within 2 ms, or set ``stop_at_switch = true`` (the env ends a period
+at each model switch, so the new model's row applies from the switch itself, at any period).
+A start other than rest can be given (``velocity``, ``mode``); ``noise_seeds = N`` re-runs the
+table from N noisy starts (the env's reset-noise law, uniform +-``noise`` rad on q1..q5, seeds
+0..N-1). Prints steps completed, distance, every model switch
 and why the run ended; writes ``summary.json``, ``figures/strip.png`` (like the paper's
 Fig. 6), ``figures/modes.png`` (Fig. 7) and ``figures/walk.gif`` into a fresh run directory.
 """
@@ -22,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 import biped_constraint_env  # noqa: F401  (registers the env)
-from biped_constraint_env.env import NOMINAL_POSTURE_RAD
+from biped_constraint_env.env import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, sample_initial_q
 from training.common import make_run_dir, parse_config, progress
 
 TABLES: dict[str, np.ndarray] = {
@@ -48,8 +52,13 @@ class OpenLoopConfig:
     table: str = "table2"  # a key of TABLES
     torques: tuple[float, ...] = ()  # 20 values [N m] (models 1-4 x joints 1-5): replaces `table`
     signs: tuple[int, ...] = (1, 1, 1, 1, 1)  # paper-to-project sign of each joint's torque
-    posture: tuple[float, ...] = NOMINAL_POSTURE_RAD  # initial model-1 q [rad]
+    posture: tuple[float, ...] = NOMINAL_POSTURE_RAD  # initial q [rad]
+    velocity: tuple[float, ...] = ()  # initial qd [rad/s] (empty: at rest)
+    mode: int = 1  # initial model
     dt: float = 0.02  # control period [s] (the paper's sample time)
+    stop_at_switch: bool = False  # end a period at each model switch (exact torque switching)
+    noise_seeds: int = 0  # also run this many noisy starts (seeds 0..N-1) and report their steps
+    noise: float = RESET_NOISE_SCALE_RAD  # their noise scale [rad]
     max_periods: int = 500  # control periods at most (10 s at 20 ms)
     seed: int = 0
     out_dir: Path = Path("runs")
@@ -78,20 +87,28 @@ def run(
     reset_seed: int | None = None,
     noise: float = 0.0,
 ) -> dict:
-    """Roll out the table; returns the summary (and per-period records under ``"frames"``)."""
+    """Roll out the table; returns the summary (and per-period records under ``"frames"``).
+
+    With ``reset_seed`` the start is the config's, with the env's reset noise (uniform in
+    [-noise, noise] rad on q1..q5, drawn from ``np.random.default_rng(reset_seed)``).
+    """
     table = torque_table(cfg)
+    q0 = np.asarray(cfg.posture, dtype=np.float64)
+    qd0 = np.asarray(cfg.velocity if cfg.velocity else np.zeros(6), dtype=np.float64)
+    if q0.shape != (6,) or qd0.shape != (6,):
+        raise ValueError("posture and velocity must have 6 values (theta0, q1..q5)")
+    if reset_seed is not None:
+        q0 = sample_initial_q(np.random.default_rng(reset_seed), q0, noise)
     env = gym.make(
         cfg.env_id,
         preset=cfg.preset,
         dt=cfg.dt,
+        stop_at_switch=cfg.stop_at_switch,
         reset_noise_scale=0.0,
         render_mode="rgb_array" if (record_frames and cfg.gif) else None,
         max_episode_steps=cfg.max_periods,
     )
-    if reset_seed is None:
-        obs, info = env.reset(seed=cfg.seed, options={"q": np.asarray(cfg.posture), "mode": 1})
-    else:  # the env's own noisy start around the posture
-        obs, info = env.reset(seed=reset_seed)
+    obs, info = env.reset(seed=cfg.seed, options={"q": q0, "qd": qd0, "mode": cfg.mode})
     u = env.unwrapped
     y0 = info["hip_y"]
     frames, images, switches, events = [], [], [], []
@@ -127,6 +144,16 @@ def run(
     }
 
 
+def noisy_starts(cfg: OpenLoopConfig) -> list[dict]:
+    """Steps, distance and end of the table from ``cfg.noise_seeds`` noisy starts."""
+    quiet = OpenLoopConfig(**{**cfg.__dict__, "gif": False, "progress": False})
+    out = []
+    for s in progress(range(cfg.noise_seeds), cfg.noise_seeds, "noisy starts", cfg.progress):
+        r = run(quiet, record_frames=False, reset_seed=s, noise=cfg.noise)
+        out.append({k: r[k] for k in ("steps_completed", "distance_m", "end_reason")} | {"seed": s})
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the baseline and write its run directory."""
     cfg = parse_config(OpenLoopConfig, argv, __doc__.splitlines()[0])
@@ -135,7 +162,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"run directory: {rd}")
     from training import plots
 
-    title = f"{cfg.table}, preset {cfg.preset}, signs {tuple(cfg.signs)}"
+    name = "config torques" if cfg.torques else cfg.table
+    title = f"{name}, preset {cfg.preset}, signs {tuple(cfg.signs)}"
     plots.stick_strip(
         out["frames"],
         rd / "figures" / "strip.png",
@@ -152,6 +180,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if cfg.gif:
         plots.save_gif(out["images"], rd / "figures" / "walk.gif", fps=1.0 / cfg.dt)
     summary = {k: v for k, v in out.items() if k not in ("frames", "images")}
+    if cfg.noise_seeds:
+        summary["noisy_starts"] = noisy_starts(cfg)
     (rd / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(
         f"steps completed: {out['steps_completed']}   distance (hip): {out['distance_m']:.3f} m   "
@@ -164,6 +194,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"  t = {t:8.4f} s   {name}{' (ended the run)' if terminal else ' (recorded, lenient)'}"
         )
     print(f"ended by: {out['end_reason']}")
+    if cfg.noise_seeds:
+        steps = [r["steps_completed"] for r in summary["noisy_starts"]]
+        print(f"steps from {cfg.noise_seeds} noisy starts (+-{cfg.noise} rad): {steps}")
     print(f"run directory: {rd}")
     return 0
 

@@ -1,16 +1,22 @@
 """Automating the paper's trial and error: a cross-entropy search for an open-loop table.
 
     python -m training.optimize_open_loop [--iterations 300] [--population 512] [--restarts 3]
+    python -m training.optimize_open_loop --start midstride   # the start's velocity searched too
 
 Searches the constant torques per model (4 x 5, within the env's +-150 N m) and the initial
-model-1 posture (q1..q5) that maximise completed walking steps under **strict** physics (the
-default simulator options: no point below the floor, no contact that has to pull). Score:
+state that maximise completed walking steps under **strict** physics (the
+default simulator options: no point below the floor, no contact that has to pull). The start:
+``rest``, the model-1 posture q1..q5 at rest (the paper's setting); ``midstride``, the
+mid-stride state of ConstrainedBiped-v2 (:func:`~biped_constraint_env.env.midstride_start`:
+model 2, leg A on its toe, turning forward) with its rate, heel angle and lean searched, plus
+offsets on q1..q5. Score:
 100 x completed steps + 10 x cycle position (4 x steps + model - 1, the furthest reached)
 + time inside the models [s]. Each population is one batch of the compiled simulator, with
 the torque switching exactly at each model switch. The best table is written as an
 ``open_loop`` config (``best_open_loop.toml`` in the run directory; the committed copy is
-``training/configs/open_loop_optimised.toml``) and re-checked through the env over 10 seeds of
-its reset noise.
+``training/configs/open_loop_optimised.toml``) and re-checked through the env, with
+``stop_at_switch`` (the row changes at the switch itself, 20 ms periods), from the found start
+and from 10 seeds of the env's reset noise around it.
 """
 
 from __future__ import annotations
@@ -23,7 +29,12 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env import paper_biped
-from biped_constraint_env.env import NOMINAL_POSTURE_RAD, TORQUE_LIMIT_NM
+from biped_constraint_env.env import (
+    NOMINAL_POSTURE_RAD,
+    TORQUE_LIMIT_NM,
+    midstride_start,
+    start_slots,
+)
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimArrays, advance
 from training.common import make_run_dir, parse_config, progress
 
@@ -39,24 +50,44 @@ class OptimiseConfig:
     seconds: float = 10.0  # simulated time per candidate [s]
     torque_sd_nm: float = 70.0  # initial spread of the torques
     posture_sd_rad: float = 0.3  # initial spread of q1..q5
+    start: str = "rest"  # "rest" (posture searched) or "midstride" (v2's start, searched)
     seed: int = 0
     out_dir: Path = Path("runs")
     progress: bool = True
 
 
-def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS):
-    """Scores and completed steps of candidates X (n, 25): 20 torques then q1..q5."""
+N_START = {"rest": 5, "midstride": 8}
+"""Start variables after the 20 torques: q1..q5 (rest); rate, theta0, lean, q1..q5 offsets."""
+
+
+def start_state(x: np.ndarray, start: str) -> tuple[np.ndarray, np.ndarray, int]:
+    """(q, qd, mode) of a candidate's start variables ``x[20:]``."""
+    if start == "rest":
+        return np.concatenate([[0.0], x[20:25]]), np.zeros(6), 1
+    if start == "midstride":
+        q, qd = midstride_start(min(x[20], 0.0), min(x[21], 0.0), x[22])
+        q[1:] += x[23:28]
+        return q, qd, 2
+    raise ValueError(f"start must be 'rest' or 'midstride', got {start!r}")
+
+
+def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS, start="rest"):
+    """Scores and completed steps of candidates X (n, 20 + N_START[start])."""
     params = params or paper_biped()
     n = len(X)
     sim = SimArrays(n)
     tables = np.clip(X[:, :20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM).reshape(n, 4, 5)
-    sim.q[:, 1:] = X[:, 20:25]
-    sim.ist[:] = (1, 0, 0, 0)
+    modes = np.empty(n, np.int64)
+    for i in range(n):
+        sim.q[i], sim.qd[i], modes[i] = start_state(X[i], start)
+    low = start_slots(params, options, sim, np.arange(n), modes)
+    sim.status[low < -1e-9] = -1  # a start below the floor scores as a failure at t = 0
+    first = modes - 1
     furthest = np.zeros(n)
     alive_s = np.zeros(n)
     for _ in range(int(round(seconds / 0.02))):
         advance(params, sim, tables, 0.02, options)
-        furthest = np.maximum(furthest, 4 * sim.ist[:, 2] + sim.ist[:, 0] - 1)
+        furthest = np.maximum(furthest, 4 * sim.ist[:, 2] + sim.ist[:, 0] - 1 - first)
         alive_s += 0.02 * (sim.status == 0)
         if (sim.status != 0).all():
             break
@@ -67,15 +98,20 @@ def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS):
 def search(cfg: OptimiseConfig, seed: int, show: bool):
     """One cross-entropy search; returns ((score, candidate, steps), history)."""
     rng = np.random.default_rng(seed)
-    mu = np.concatenate([rng.normal(0, 30, 20), np.asarray(NOMINAL_POSTURE_RAD)[1:]])
-    sd = np.concatenate([np.full(20, cfg.torque_sd_nm), np.full(5, cfg.posture_sd_rad)])
-    floor = np.concatenate([np.full(20, 2.0), np.full(5, 0.01)])
+    if cfg.start == "rest":
+        mu0, sd0 = np.asarray(NOMINAL_POSTURE_RAD)[1:], np.full(5, cfg.posture_sd_rad)
+    else:  # v2's mean start: rate -1 rad/s, heel up 0.2 rad, lean 0.1 rad; no offsets
+        mu0 = np.array([-1.0, -0.2, 0.1, 0, 0, 0, 0, 0])
+        sd0 = np.array([0.5, 0.1, 0.1, *np.full(5, cfg.posture_sd_rad)])
+    mu = np.concatenate([rng.normal(0, 30, 20), mu0])
+    sd = np.concatenate([np.full(20, cfg.torque_sd_nm), sd0])
+    floor = np.concatenate([np.full(20, 2.0), np.full(len(mu0), 0.01)])
     best = (-np.inf, None, 0)
     history = []
     for it in progress(range(cfg.iterations), cfg.iterations, f"search {seed}", show):
-        X = mu + sd * rng.standard_normal((cfg.population, 25))
+        X = mu + sd * rng.standard_normal((cfg.population, len(mu)))
         X[:, :20] = np.clip(X[:, :20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)
-        s, steps = score(X, cfg.seconds)
+        s, steps = score(X, cfg.seconds, start=cfg.start)
         el = np.argsort(-s)[: cfg.elite]
         if s[el[0]] > best[0]:
             best = (float(s[el[0]]), X[el[0]].copy(), int(steps[el[0]]))
@@ -85,23 +121,39 @@ def search(cfg: OptimiseConfig, seed: int, show: bool):
     return best, history
 
 
-def robustness(x: np.ndarray, seeds: int = 10) -> list[int]:
-    """Completed steps through the env, strict default preset, over its reset-noise seeds."""
-    from training.open_loop import OpenLoopConfig, run
+def open_loop_config(x: np.ndarray, start: str):
+    """The ``open_loop`` config of candidate x: exact switching through the env, 20 ms periods."""
+    from training.open_loop import OpenLoopConfig
 
-    cfg = OpenLoopConfig(
+    q, qd, mode = start_state(x, start)
+    return OpenLoopConfig(
         preset="default",
-        dt=0.002,
-        max_periods=5000,
+        dt=0.02,
+        stop_at_switch=True,
+        max_periods=1000,
         gif=False,
         progress=False,
         torques=tuple(x[:20]),
-        posture=(0.0, *x[20:25]),
+        posture=tuple(q),
+        velocity=tuple(qd),
+        mode=mode,
     )
-    return [
-        run(cfg, record_frames=False, reset_seed=s, noise=0.01)["steps_completed"]
-        for s in range(seeds)
-    ]
+
+
+def robustness(x: np.ndarray, start: str, seeds: int = 10) -> tuple[dict, list[int]]:
+    """Through the env: the run from the found start, and the steps from ``seeds`` noisy starts."""
+    from training.open_loop import noisy_starts, run
+
+    cfg = open_loop_config(x, start)
+    exact = run(cfg, record_frames=False)
+    exact = {k: exact[k] for k in ("steps_completed", "distance_m", "end_reason")}
+    noisy = noisy_starts(OpenLoopConfig_with(cfg, noise_seeds=seeds))
+    return exact, [r["steps_completed"] for r in noisy]
+
+
+def OpenLoopConfig_with(cfg, **changes):  # noqa: N802 (reads as a constructor)
+    """A copy of an OpenLoopConfig with ``changes``."""
+    return cfg.__class__(**{**cfg.__dict__, **changes})
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -125,20 +177,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     top = max(results, key=lambda d: d["score"])
     x = np.array(top["x"])
     x[:20] = np.clip(x[:20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)
-    rob = robustness(x)
+    exact, rob = robustness(x, cfg.start)
+    oc = open_loop_config(x, cfg.start)
     toml = (
         "# Open-loop table found by training/optimize_open_loop.py under strict physics\n"
-        f"# (search seed {top['seed']}, {top['steps']} steps from the exact posture;\n"
+        f"# (start {cfg.start!r}, search seed {top['seed']}, {top['steps']} steps in the search;\n"
+        f"# through the env: {exact['steps_completed']} steps, {exact['distance_m']:.3f} m, "
+        f"ended by {exact['end_reason']};\n"
         f"# completed steps over 10 reset-noise seeds: {rob}).\n"
-        'preset = "default"\ndt = 0.002\nmax_periods = 5000\n'
+        f'preset = "default"\ndt = {oc.dt}\nstop_at_switch = true\nmax_periods = {oc.max_periods}\n'
         f"torques = {json.dumps(x[:20].tolist())}\n"  # full precision: the steps are fragile
-        f"posture = {json.dumps([0.0] + x[20:25].tolist())}\n"
+        f"posture = {json.dumps(list(oc.posture))}\n"
+        f"velocity = {json.dumps(list(oc.velocity))}\nmode = {oc.mode}\n"
     )
     (rd / "best_open_loop.toml").write_text(toml)
     (rd / "summary.json").write_text(
-        json.dumps({"searches": results, "best": top, "robustness_steps_10_seeds": rob}, indent=1)
+        json.dumps(
+            {"searches": results, "best": top, "env_run": exact, "robustness_steps_10_seeds": rob},
+            indent=1,
+        )
     )
     print(toml)
+    print(f"through the env: {exact}")
     print(f"steps over 10 reset-noise seeds: {rob}")
     print(f"run directory: {rd}")
     return 0
