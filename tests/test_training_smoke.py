@@ -217,3 +217,16 @@ def test_optimised_table_documented_step_counts():
     held = cfg.__class__(**{**quiet, "stop_at_switch": False, "dt": 0.002, "max_periods": 5000})
     out = open_loop.run(held, record_frames=False)
     assert out["steps_completed"] == 0 and out["end_reason"] == "stance_toe_pulls"
+
+
+def test_optimised_midstride_table_documented_step_count():
+    """README: the mid-stride table walks 1 step forward through the env, then stops."""
+    from pathlib import Path
+
+    path = Path(__file__).parents[1] / "training/configs/open_loop_optimised_midstride.toml"
+    cfg = open_loop.parse_config(open_loop.OpenLoopConfig, ["--config", str(path)], "x")
+    out = open_loop.run(
+        cfg.__class__(**{**cfg.__dict__, "gif": False, "progress": False}), record_frames=False
+    )
+    assert out["steps_completed"] == 1 and out["end_reason"] == "step_behind_stance_toe"
+    assert 1.2 < out["distance_m"] < 1.3
