@@ -1,5 +1,6 @@
 """Scripts and SB3 on the env with tiny budgets (smoke)."""
 
+import dataclasses
 import json
 
 import gymnasium as gym
@@ -210,11 +211,11 @@ def test_optimised_table_documented_step_counts():
             break
     assert st.steps_completed == 1
     cfg = open_loop.parse_config(open_loop.OpenLoopConfig, ["--config", str(path)], "x")
-    quiet = {**cfg.__dict__, "gif": False, "progress": False}
-    out = open_loop.run(cfg.__class__(**quiet), record_frames=False)
+    quiet = dataclasses.replace(cfg, gif=False, progress=False)
+    out = open_loop.run(quiet, record_frames=False)
     assert cfg.stop_at_switch and out["steps_completed"] == 1
     assert out["distance_m"] < -0.9  # the one step goes backwards (README)
-    held = cfg.__class__(**{**quiet, "stop_at_switch": False, "dt": 0.002, "max_periods": 5000})
+    held = dataclasses.replace(quiet, stop_at_switch=False, dt=0.002, max_periods=5000)
     out = open_loop.run(held, record_frames=False)
     assert out["steps_completed"] == 0 and out["end_reason"] == "stance_toe_pulls"
 
@@ -225,8 +226,6 @@ def test_optimised_midstride_table_documented_step_count():
 
     path = Path(__file__).parents[1] / "training/configs/open_loop_optimised_midstride.toml"
     cfg = open_loop.parse_config(open_loop.OpenLoopConfig, ["--config", str(path)], "x")
-    out = open_loop.run(
-        cfg.__class__(**{**cfg.__dict__, "gif": False, "progress": False}), record_frames=False
-    )
+    out = open_loop.run(dataclasses.replace(cfg, gif=False, progress=False), record_frames=False)
     assert out["steps_completed"] == 1 and out["end_reason"] == "step_behind_stance_toe"
     assert 1.2 < out["distance_m"] < 1.3

@@ -17,6 +17,7 @@ Fig. 6), ``figures/modes.png`` (Fig. 7) and ``figures/walk.gif`` into a fresh ru
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -146,7 +147,7 @@ def run(
 
 def noisy_starts(cfg: OpenLoopConfig) -> list[dict]:
     """Steps, distance and end of the table from ``cfg.noise_seeds`` noisy starts."""
-    quiet = OpenLoopConfig(**{**cfg.__dict__, "gif": False, "progress": False})
+    quiet = dataclasses.replace(cfg, gif=False, progress=False)
     out = []
     for s in progress(range(cfg.noise_seeds), cfg.noise_seeds, "noisy starts", cfg.progress):
         r = run(quiet, record_frames=False, reset_seed=s, noise=cfg.noise)

@@ -21,6 +21,7 @@ and from 10 seeds of the env's reset noise around it.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -56,12 +57,11 @@ class OptimiseConfig:
     progress: bool = True
 
 
-N_START = {"rest": 5, "midstride": 8}
-"""Start variables after the 20 torques: q1..q5 (rest); rate, theta0, lean, q1..q5 offsets."""
-
-
 def start_state(x: np.ndarray, start: str) -> tuple[np.ndarray, np.ndarray, int]:
-    """(q, qd, mode) of a candidate's start variables ``x[20:]``."""
+    """(q, qd, mode) of a candidate's start variables ``x[20:]``.
+
+    "rest": q1..q5 (5 values); "midstride": rate, theta0, lean, then offsets on q1..q5 (8).
+    """
     if start == "rest":
         return np.concatenate([[0.0], x[20:25]]), np.zeros(6), 1
     if start == "midstride":
@@ -72,7 +72,7 @@ def start_state(x: np.ndarray, start: str) -> tuple[np.ndarray, np.ndarray, int]
 
 
 def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS, start="rest"):
-    """Scores and completed steps of candidates X (n, 20 + N_START[start])."""
+    """Scores and completed steps of candidates X (n, 20 torques + the start's variables)."""
     params = params or paper_biped()
     n = len(X)
     sim = SimArrays(n)
@@ -140,20 +140,14 @@ def open_loop_config(x: np.ndarray, start: str):
     )
 
 
-def robustness(x: np.ndarray, start: str, seeds: int = 10) -> tuple[dict, list[int]]:
-    """Through the env: the run from the found start, and the steps from ``seeds`` noisy starts."""
+def robustness(cfg, seeds: int = 10) -> tuple[dict, list[int]]:
+    """Through the env: the run of an ``open_loop`` config from its start, then ``seeds`` noisy."""
     from training.open_loop import noisy_starts, run
 
-    cfg = open_loop_config(x, start)
     exact = run(cfg, record_frames=False)
     exact = {k: exact[k] for k in ("steps_completed", "distance_m", "end_reason")}
-    noisy = noisy_starts(OpenLoopConfig_with(cfg, noise_seeds=seeds))
+    noisy = noisy_starts(dataclasses.replace(cfg, noise_seeds=seeds))
     return exact, [r["steps_completed"] for r in noisy]
-
-
-def OpenLoopConfig_with(cfg, **changes):  # noqa: N802 (reads as a constructor)
-    """A copy of an OpenLoopConfig with ``changes``."""
-    return cfg.__class__(**{**cfg.__dict__, **changes})
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -177,8 +171,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     top = max(results, key=lambda d: d["score"])
     x = np.array(top["x"])
     x[:20] = np.clip(x[:20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)
-    exact, rob = robustness(x, cfg.start)
     oc = open_loop_config(x, cfg.start)
+    exact, rob = robustness(oc)
     toml = (
         "# Open-loop table found by training/optimize_open_loop.py under strict physics\n"
         f"# (start {cfg.start!r}, search seed {top['seed']}, {top['steps']} steps in the search;\n"
