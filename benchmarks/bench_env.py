@@ -21,8 +21,8 @@ import biped_constraint_env  # noqa: F401  (registers ConstrainedBiped-v0)
 ACTION_FRACTION = 0.05  # random actions at 5% of the bound: episodes last tens of steps
 
 
-def per_step_us(env_id: str, n: int, seed: int = 0) -> float:
-    env = gym.make(env_id)
+def per_step_us(env_id: str, n: int, seed: int = 0, **kwargs) -> float:
+    env = gym.make(env_id, **kwargs)
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     high = env.action_space.high
@@ -41,8 +41,10 @@ def per_step_us(env_id: str, n: int, seed: int = 0) -> float:
     return dt / n * 1e6
 
 
-def vec_steps_per_s(env_id: str, num_envs: int, mode: str, n: int, seed: int = 0) -> float:
-    venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode)
+def vec_steps_per_s(
+    env_id: str, num_envs: int, mode: str, n: int, seed: int = 0, **kwargs
+) -> float:
+    venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **kwargs)
     venv.reset(seed=seed)
     rng = np.random.default_rng(seed)
     high = venv.single_action_space.high
@@ -60,13 +62,10 @@ def vec_steps_per_s(env_id: str, num_envs: int, mode: str, n: int, seed: int = 0
 
 
 def main(argv=None) -> int:
-    import warnings
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=5000, help="env.step calls per timing")
     ap.add_argument("--num-envs", type=int, default=64, help="sub-environments of the vector envs")
     args = ap.parse_args(argv)
-    warnings.filterwarnings("ignore", message=".*out of date.*")  # v0 is measured on purpose
     walker = per_step_us("Walker2d-v5", args.steps)
     n_vec = max(args.steps // args.num_envs, 20)
     walker_s = vec_steps_per_s("Walker2d-v5", args.num_envs, "sync", n_vec)
@@ -74,11 +73,16 @@ def main(argv=None) -> int:
         f"Walker2d-v5: env.step {walker:.1f} us | make_vec sync, {args.num_envs} envs: "
         f"{walker_s:.0f} steps/s"
     )
-    for env_id, label in (("ConstrainedBiped-v0", "RK2 x 4"), ("ConstrainedBiped-v1", "RK4 x 16")):
-        ours = per_step_us(env_id, args.steps)
-        ours_b = vec_steps_per_s(env_id, args.num_envs, "vector_entry_point", n_vec * 4)
+    env_id = "ConstrainedBiped-v0"
+    for label, kw in (
+        ("default: walking task, 5 ms, RK4 x 4", {}),
+        ("task='paper', preset='default': 20 ms, RK4 x 16", {"task": "paper", "preset": "default"}),
+        ("task='paper', preset='fast': 20 ms, RK2 x 4", {"task": "paper", "preset": "fast"}),
+    ):
+        ours = per_step_us(env_id, args.steps, **kw)
+        ours_b = vec_steps_per_s(env_id, args.num_envs, "vector_entry_point", n_vec * 4, **kw)
         print(
-            f"{env_id} ({label}): env.step {ours:.1f} us (ratio {ours / walker:.3f}, target "
+            f"{env_id} {label}: env.step {ours:.1f} us (ratio {ours / walker:.3f}, target "
             f"<= 0.25) | batched {ours_b:.0f} steps/s (ratio {ours_b / walker_s:.1f}, target >= 20)"
         )
     return 0

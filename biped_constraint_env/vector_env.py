@@ -17,24 +17,19 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .env import (
-    OBS_DIM,
-    OBS_HIGH,
-    OBS_LOW,
+from .actions import validate_actions
+from .env import ConstrainedBipedEnv
+from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe
+from .rewards import (
     REWARD_TERMS,
     TERMINATION_FALL,
     TERMINATION_NON_FINITE,
-    ConstrainedBipedEnv,
-    check_start_state,
     cycle_position,
     fallen,
-    nb_observe,
     reward_terms,
-    sample_start,
-    start_sampled,
-    state_from_options,
-    validate_actions,
 )
+from .starts import check_start_state, sample_start, start_sampled, state_from_options
+from .tasks import MAX_EPISODE_STEPS
 from .model import N_ACTUATED
 from .simulator import STATUS_NONFINITE, STATUS_TERMINATED, SimArrays, advance, evaluate
 
@@ -44,7 +39,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     Args:
         num_envs: number of sub-environments.
-        max_episode_steps: truncation after this many control periods (registration: 1000).
+        max_episode_steps: truncation after this many control periods (registration: 6000).
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` (Gymnasium's default) or ``SAME_STEP``
             (a finished sub-environment is reset within the same step; its last observation
             is in ``info["final_obs"]`` and its last info in ``info["final_info"]``, as
@@ -54,7 +49,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = MAX_EPISODE_STEPS,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any):
         """Create the batch; the single env validates the arguments."""
         if kwargs.get("render_mode") is not None:

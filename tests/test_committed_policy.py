@@ -34,7 +34,7 @@ def test_committed_policy_loads_and_is_deterministic():
 
     torch.set_num_threads(1)
     model, vecnorm, cfg = load(POLICY, "final")
-    assert cfg.env_id == "ConstrainedBiped-v2" and cfg.base_controller == "model"
+    assert cfg.env_id == "ConstrainedBiped-v0" and cfg.base_controller == "model"
     a, info = _episode(model, vecnorm, cfg, seed=0, periods=300)  # 1.5 s
     b, _ = _episode(model, vecnorm, cfg, seed=0, periods=300)
     np.testing.assert_array_equal(a, b)

@@ -1,4 +1,4 @@
-"""ConstrainedBiped-v1: API conformance, determinism, bad input, info consistency, rendering."""
+"""ConstrainedBiped-v0: API conformance, determinism, bad input, info consistency, rendering."""
 
 import pickle
 import warnings
@@ -9,10 +9,13 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import biped_constraint_env  # noqa: F401
-from biped_constraint_env.env import OBS_NAMES, REWARD_TERMS, ConstrainedBipedEnv
+from biped_constraint_env.env import ConstrainedBipedEnv
+from biped_constraint_env.observation import OBS_NAMES
+from biped_constraint_env.rewards import REWARD_TERMS
 from biped_constraint_env.modes import Mode
 
-ENV_ID = "ConstrainedBiped-v1"
+ENV_ID = "ConstrainedBiped-v0"
+V1 = {"task": "paper", "preset": "default"}  # the paper's task (rest, 20 ms), accurate physics
 SMALL = 8.0  # [N m] random torques small enough that episodes last tens of steps
 
 
@@ -37,7 +40,7 @@ training scripts rescale it to [-1, 1]. Any other warning fails the tests below.
 
 
 def test_gymnasium_check_env_no_other_warnings():
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, **V1)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env.unwrapped, skip_render_check=True)
@@ -50,7 +53,7 @@ def test_gymnasium_check_env_no_other_warnings():
 def test_sb3_check_env():
     from stable_baselines3.common.env_checker import check_env as sb3_check
 
-    env = ConstrainedBipedEnv()
+    env = ConstrainedBipedEnv(**V1)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         sb3_check(env, warn=True)
@@ -61,8 +64,8 @@ def test_sb3_check_env():
 
 
 def test_make_and_spaces():
-    env = gym.make(ENV_ID)
-    assert env.spec.max_episode_steps == 1000
+    env = gym.make(ENV_ID, **V1)
+    assert env.spec.max_episode_steps == 6000
     assert env.action_space.shape == (5,) and env.action_space.high[0] == 150.0
     obs, info = env.reset(seed=0)
     assert obs.shape == (24,) and len(OBS_NAMES) == 24
@@ -71,21 +74,21 @@ def test_make_and_spaces():
 
 
 def test_determinism_same_seed():
-    a = _rollout(gym.make(ENV_ID), 7, 150)
-    b = _rollout(gym.make(ENV_ID), 7, 150)
+    a = _rollout(gym.make(ENV_ID, **V1), 7, 150)
+    b = _rollout(gym.make(ENV_ID, **V1), 7, 150)
     for (oa, ra, _), (ob, rb, _) in zip(a, b, strict=True):
         assert np.array_equal(oa, ob) and ra == rb
 
 
 def test_obs_in_space_and_reward_equals_terms():
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, **V1)
     for obs, r, info in _rollout(env, 3, 600):
         assert env.observation_space.contains(obs)
         assert r == pytest.approx(sum(info[k] for k in REWARD_TERMS), abs=1e-12)
 
 
 def test_info_consistent_with_state():
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, **V1)
     env.reset(seed=1)
     u = env.unwrapped
     y0 = u.keypoints()["hip"][0]
@@ -110,25 +113,25 @@ def test_info_consistent_with_state():
     ],
 )
 def test_bad_actions_raise(bad):
-    env = gym.make(ENV_ID).unwrapped
+    env = gym.make(ENV_ID, **V1).unwrapped
     env.reset(seed=0)
     with pytest.raises(ValueError, match="action"):
         env.step(bad)
 
 
 def test_out_of_range_clip_or_raise():
-    env = ConstrainedBipedEnv()
+    env = ConstrainedBipedEnv(**V1)
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.full(5, 1e4))
     assert info["reward_ctrl"] == pytest.approx(-0.1 * 5)  # clipped to the limit
-    env2 = ConstrainedBipedEnv(out_of_range="raise")
+    env2 = ConstrainedBipedEnv(**V1, out_of_range="raise")
     env2.reset(seed=0)
     with pytest.raises(ValueError, match="limit"):
         env2.step(np.full(5, 200.0))
 
 
 def test_reset_options_and_impossible_state():
-    env = ConstrainedBipedEnv()
+    env = ConstrainedBipedEnv(**V1)
     q = np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])
     obs, info = env.reset(options={"q": q, "qd": np.zeros(6), "mode": 1})
     assert obs[:6] == pytest.approx(q) and info["mode"] == 1
@@ -156,7 +159,7 @@ def test_bad_constructor_arguments():
 
 
 def test_termination_reason_and_no_truncation_before_limit():
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, **V1)
     env.reset(seed=0)
     for _ in range(200):
         _, _, te, tr, info = env.step(np.array([-150, 0, 0, 0, 0], np.float32))
@@ -167,7 +170,7 @@ def test_termination_reason_and_no_truncation_before_limit():
 
 
 def test_truncation_by_time_limit():
-    env = gym.make(ENV_ID, max_episode_steps=3)
+    env = gym.make(ENV_ID, **V1, max_episode_steps=3)
     env.reset(seed=0)
     out = [env.step(np.zeros(5, np.float32)) for _ in range(3)]
     assert not any(o[2] for o in out) and out[-1][3]
@@ -188,7 +191,7 @@ def test_paper_preset_options():
 
 
 def test_pickle_roundtrip_gives_same_future():
-    env = ConstrainedBipedEnv()
+    env = ConstrainedBipedEnv(**V1)
     env.reset(seed=5)
     env.step(np.ones(5) * 3)
     clone = pickle.loads(pickle.dumps(env))
@@ -198,7 +201,7 @@ def test_pickle_roundtrip_gives_same_future():
 
 
 def test_rgb_array_frames():
-    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env = gym.make(ENV_ID, **V1, render_mode="rgb_array")
     env.reset(seed=0)
     f0 = env.render()
     for _ in range(5):
@@ -209,7 +212,7 @@ def test_rgb_array_frames():
 
 
 def test_unwrapped_exposes_state():
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, **V1)
     env.reset(seed=0)
     st = env.unwrapped.state
     assert st.mode == Mode.FOOT_FLAT and st.stance_side == 0 and st.q.shape == (6,)
@@ -217,7 +220,7 @@ def test_unwrapped_exposes_state():
 
 def test_switch_and_alive_terms():
     """A period with the 1 -> 2 switch earns the switch bonus; a terminating one no alive bonus."""
-    env = ConstrainedBipedEnv()
+    env = ConstrainedBipedEnv(**V1)
     env.reset(seed=0)
     _, _, te, _, info = env.step(np.array([60.0, 0, 0, 0, 0]))  # ankle torque lifts the heel
     assert info["switches"] and info["switches"][0][1:] == (1, 2)
@@ -229,7 +232,7 @@ def test_switch_and_alive_terms():
 
 
 def test_fall_termination_optional():
-    env = ConstrainedBipedEnv(fall_hip_height_m=2.99)  # zero torque: hip below in ~9 periods
+    env = ConstrainedBipedEnv(**V1, fall_hip_height_m=2.99)  # zero torque: hip below in ~9 periods
     env.reset(seed=0)
     for _ in range(100):
         _, _, te, _, info = env.step(np.zeros(5))
@@ -240,16 +243,11 @@ def test_fall_termination_optional():
         ConstrainedBipedEnv(fall_hip_height_m=np.nan)
 
 
-def test_midstride_start_v2():
-    """v2 starts in model 2 from the documented ranges, moving forward; bad ``start`` raises."""
-    from biped_constraint_env.env import (
-        MIDSTRIDE_RATE_RANGE_RAD_S,
-        MIDSTRIDE_THETA0_RANGE_RAD,
-        check_start_state,
-        midstride_start,
-    )
+def test_midstride_start():
+    """The walking task starts in model 2 from the documented ranges, moving forward; bad ``start`` raises."""
+    from biped_constraint_env.starts import MIDSTRIDE_RATE_RANGE_RAD_S, MIDSTRIDE_THETA0_RANGE_RAD, check_start_state, midstride_start
 
-    env = gym.make("ConstrainedBiped-v2")
+    env = gym.make("ConstrainedBiped-v0")
     assert env.spec.max_episode_steps == 6000
     u = env.unwrapped
     assert u.dt == 0.005 and u.options.stop_at_switch and u.start == "midstride"

@@ -56,12 +56,12 @@ def test_torques_keep_the_contacts_pushing_at_the_sample():
         assert not term
 
 
-def test_documented_walk_on_v2():
-    """README: on ConstrainedBiped-v2 (strict physics) reset seed 0 walks on; 20 complete
+def test_documented_walk():
+    """README: on ConstrainedBiped-v0 (strict physics) reset seed 0 walks on; 20 complete
     steps here (the README's 30 s episodes reach 30-31 steps)."""
     import gymnasium as gym
 
-    env = gym.make("ConstrainedBiped-v2").unwrapped
+    env = gym.make("ConstrainedBiped-v0").unwrapped
     assert env.options.strict
     ctl = ModelController(params=env.params, options=env.options)
     steps, dist, reason, t = run_episode(env, ctl, seed=0, cap=20)
@@ -87,7 +87,7 @@ def test_unknown_gain_raises():
 
 def test_residual_is_projected_onto_the_constraints():
     """A residual moves the torques, but never so far that a contact pulls at the sample."""
-    from training.fsm_controller import action_map_from
+    from training.sb3_vec import action_map_from
 
     env = _env()
     ctl = ModelController(params=env.params, options=env.options)
@@ -107,7 +107,7 @@ def test_residual_is_projected_onto_the_constraints():
         obs, _, term, _, _ = env.step(base)
         assert not term
     assert moved > 30  # the residual does act
-    amap = action_map_from("model", 0.05, 150.0)  # the training config's spelling
+    amap = action_map_from("model", 7.5)  # the training config's spelling
     a = np.full((1, 5), 0.5)
     np.testing.assert_allclose(amap(a, obs[None]), ctl(obs[None], residual=3.75 * np.ones((1, 5))))
     with pytest.raises(ValueError, match="residual"):

@@ -1,37 +1,69 @@
 import doctest
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
 import biped_constraint_env
 from biped_constraint_env import env as env_module
+from biped_constraint_env.tasks import TASKS
 
 
-def test_registered_with_string_entry_points():
-    for env_id in ("ConstrainedBiped-v0", "ConstrainedBiped-v1"):
-        spec = gym.spec(env_id)
-        assert spec.kwargs == ({"preset": "fast"} if env_id.endswith("v0") else {})
-        assert spec.entry_point == "biped_constraint_env.env:ConstrainedBipedEnv"
-        assert (
-            spec.vector_entry_point == "biped_constraint_env.vector_env:ConstrainedBipedVectorEnv"
-        )
-        assert spec.max_episode_steps == biped_constraint_env.MAX_EPISODE_STEPS == 1000
+def test_one_id_with_string_entry_points():
+    ids = [k for k in gym.registry if "ConstrainedBiped" in k]
+    assert ids == ["ConstrainedBiped-v0"]
+    spec = gym.spec("ConstrainedBiped-v0")
+    assert spec.kwargs == {}
+    assert spec.entry_point == "biped_constraint_env.env:ConstrainedBipedEnv"
+    assert spec.vector_entry_point == "biped_constraint_env.vector_env:ConstrainedBipedVectorEnv"
+    assert spec.max_episode_steps == biped_constraint_env.MAX_EPISODE_STEPS == 6000
 
 
-def test_versions_differ_only_in_the_integrator():
-    with pytest.warns(DeprecationWarning, match="out of date"):
-        v0 = gym.make("ConstrainedBiped-v0").unwrapped.options
-    v1 = gym.make("ConstrainedBiped-v1").unwrapped.options
-    assert (v0.integrator, v0.substeps) == ("rk2", 4) and (v1.integrator, v1.substeps) == (
-        "rk4",
-        16,
+def test_defaults_are_the_accurate_physics_and_the_walking_task():
+    env = gym.make("ConstrainedBiped-v0").unwrapped
+    assert env.options == biped_constraint_env.DEFAULT_OPTIONS.replace(stop_at_switch=True)
+    assert (env.dt, env.start, env.task) == (0.005, "midstride", "walk")
+    _, info = env.reset(seed=0)
+    assert info["mode"] == 2
+
+
+def test_paper_task_and_overrides():
+    env = gym.make("ConstrainedBiped-v0", task="paper").unwrapped
+    assert env.options == biped_constraint_env.PAPER_OPTIONS
+    assert (env.dt, env.start) == (0.02, "rest")
+    _, info = env.reset(seed=0)
+    assert info["mode"] == 1
+    # an explicit argument overrides the task's value, the rest of the task stays
+    env = gym.make("ConstrainedBiped-v0", task="paper", preset="default").unwrapped
+    assert env.options == biped_constraint_env.DEFAULT_OPTIONS and env.dt == 0.02
+    env = gym.make("ConstrainedBiped-v0", preset="fast").unwrapped
+    assert (env.options.integrator, env.options.substeps, env.dt) == ("rk2", 4, 0.005)
+    assert set(TASKS) == {"walk", "paper"}
+
+
+def test_vector_env_takes_the_same_task():
+    vec = gym.make_vec(
+        "ConstrainedBiped-v0", num_envs=2, vectorization_mode="vector_entry_point", task="paper"
     )
-    assert v0.replace(integrator="rk4", substeps=16) == v1
-    with pytest.warns(DeprecationWarning, match="out of date"):
-        vec = gym.make_vec(
-            "ConstrainedBiped-v0", num_envs=2, vectorization_mode="vector_entry_point"
-        )
-    assert vec.options == v0
+    single = gym.make("ConstrainedBiped-v0", task="paper").unwrapped
+    assert vec.options == single.options and vec.dt == single.dt
+    obs, _ = vec.reset(seed=3)
+    o0, _ = single.reset(seed=3)
+    np.testing.assert_array_equal(obs[0], o0)
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"task": "run"}, "task"),
+        ({"preset": "turbo"}, "preset"),
+        ({"dt": 0.0}, "dt"),
+        ({"start": "flying"}, "start"),
+    ],
+)
+def test_bad_task_arguments_name_themselves(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        gym.make("ConstrainedBiped-v0", **kwargs)
 
 
 def test_env_docstring_example_runs():

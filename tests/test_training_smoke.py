@@ -40,7 +40,7 @@ def test_open_loop_config_file_and_flags(tmp_path):
 
 def test_open_loop_noisy_starts_use_the_config_start():
     """The noisy starts are the config's start plus the env's noise law, seed by seed."""
-    from biped_constraint_env.env import midstride_start
+    from biped_constraint_env.starts import midstride_start
 
     q, qd = midstride_start(-1.0, -0.2)
     cfg = open_loop.OpenLoopConfig(
@@ -91,7 +91,7 @@ def test_sb3_ppo_learns_2048_steps(tmp_path):
 
     torch.set_num_threads(1)
     lo, hi = np.full(5, -1.0, np.float32), np.full(5, 1.0, np.float32)
-    env = RescaleAction(gym.make("ConstrainedBiped-v1"), lo, hi)
+    env = RescaleAction(gym.make("ConstrainedBiped-v0", task="paper", preset="default"), lo, hi)
     model = PPO("MlpPolicy", env, n_steps=512, batch_size=128, n_epochs=2, seed=0, device="cpu")
     model.learn(total_timesteps=2048)
     assert model.num_timesteps >= 2048

@@ -5,13 +5,14 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from biped_constraint_env.env import OBS_NAMES
+from biped_constraint_env.observation import OBS_NAMES
 
-ENV_ID = "ConstrainedBiped-v1"
+ENV_ID = "ConstrainedBiped-v0"
+V1 = {"task": "paper", "preset": "default"}  # rest start, 20 ms: long episodes under +-8 N m
 
 
 def _run(mode, n_envs, steps, seed=3):
-    ve = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode=mode)
+    ve = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode=mode, **V1)
     obs, _ = ve.reset(seed=seed)
     rng = np.random.default_rng(0)
     obs_seq, R, T = [obs], [], []
@@ -40,7 +41,7 @@ def test_async_matches_sync():
 
 def test_batched_truncation_and_infos():
     ve = gym.make_vec(
-        ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=2
+        ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=2, **V1
     )
     ve.reset(seed=0)
     _, _, te, tr, _ = ve.step(np.zeros((2, 5), np.float32))
@@ -63,7 +64,7 @@ def test_same_step_autoreset_matches_next_step():
     """SAME_STEP returns the reset observation at once and the final one in info."""
     from gymnasium.vector import AutoresetMode
 
-    kw = dict(num_envs=3, vectorization_mode="vector_entry_point")
+    kw = dict(num_envs=3, vectorization_mode="vector_entry_point", **V1)
     nxt = gym.make_vec(ENV_ID, **kw)
     same = gym.make_vec(ENV_ID, autoreset_mode=AutoresetMode.SAME_STEP, **kw)
     nxt.reset(seed=1)
@@ -86,23 +87,23 @@ def test_same_step_autoreset_matches_next_step():
 
 
 def test_fall_termination_same_in_batched_and_single():
-    kw = dict(num_envs=3, fall_hip_height_m=2.7)
+    kw = dict(num_envs=3, fall_hip_height_m=2.7, **V1)
     ob, rb, tb = _run_kw("vector_entry_point", kw)
     os_, rs, ts = _run_kw("sync", kw)
     assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
 
 
 def test_midstride_start_same_in_batched_and_single():
-    """v2 (mid-stride start, 5 ms, stop at switches): the batched env equals the single envs."""
+    """The default walking task (mid-stride start, 5 ms, stop at switches): batched = single."""
     kw = dict(num_envs=3)
-    ob, rb, tb = _run_kw("vector_entry_point", kw, steps=150, env_id="ConstrainedBiped-v2")
-    os_, rs, ts = _run_kw("sync", kw, steps=150, env_id="ConstrainedBiped-v2")
+    ob, rb, tb = _run_kw("vector_entry_point", kw, steps=150)
+    os_, rs, ts = _run_kw("sync", kw, steps=150)
     assert np.all(ob[0, :, OBS_NAMES.index("mode_2")] == 1.0)  # every slot starts in model 2
     assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
 
 
-def _run_kw(mode, kw, steps=60, seed=3, env_id=ENV_ID):
-    ve = gym.make_vec(env_id, vectorization_mode=mode, **kw)
+def _run_kw(mode, kw, steps=60, seed=3):
+    ve = gym.make_vec(ENV_ID, vectorization_mode=mode, **kw)
     obs, _ = ve.reset(seed=seed)
     rng = np.random.default_rng(0)
     obs_seq, R, T = [obs], [], []

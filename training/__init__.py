@@ -1,1 +1,1 @@
-"""Experiments on ConstrainedBiped-v1: the open-loop baseline and PPO scripts."""
+"""Training and studies on ConstrainedBiped-v0: the Table 2 baseline, the walking controller, PPO."""

@@ -39,12 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_constraint_env.env import (
-    NOMINAL_POSTURE_RAD,
-    OBS_NAMES,
-    TORQUE_LIMIT_NM,
-    midstride_start,
-)
+from biped_constraint_env.actions import TORQUE_LIMIT_NM
+from biped_constraint_env.observation import OBS_NAMES
+from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start
 from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode

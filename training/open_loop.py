@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 import biped_constraint_env  # noqa: F401  (registers the env)
-from biped_constraint_env.env import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, sample_initial_q
+from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, sample_initial_q
 from training.common import make_run_dir, parse_config, progress
 
 TABLES: dict[str, np.ndarray] = {
@@ -48,7 +48,8 @@ GIF_MAX_FRAMES = 400
 class OpenLoopConfig:
     """Settings of one open-loop run (defaults: the paper's reading, Table 2)."""
 
-    env_id: str = "ConstrainedBiped-v1"
+    env_id: str = "ConstrainedBiped-v0"
+    task: str = "paper"  # the env's task: rest start, 20 ms, the paper's numerics (preset below)
     preset: str = "paper"  # "paper" (the paper's numerics) or "default"
     table: str = "table2"  # a key of TABLES
     torques: tuple[float, ...] = ()  # 20 values [N m] (models 1-4 x joints 1-5): replaces `table`
@@ -102,6 +103,7 @@ def run(
         q0 = sample_initial_q(np.random.default_rng(reset_seed), q0, noise)
     env = gym.make(
         cfg.env_id,
+        task=cfg.task,
         preset=cfg.preset,
         dt=cfg.dt,
         stop_at_switch=cfg.stop_at_switch,

@@ -1,4 +1,4 @@
-"""Automating the paper's trial and error: a cross-entropy search for an open-loop table.
+"""Automating the paper's trial and error: a CMA-ES search (``cma``) for an open-loop table.
 
     python -m training.optimize_open_loop [--iterations 300] [--population 512] [--restarts 3]
     python -m training.optimize_open_loop --start midstride   # the start's velocity searched too
@@ -7,11 +7,12 @@ Searches the constant torques per model (4 x 5, within the env's +-150 N m) and 
 state that maximise completed walking steps under **strict** physics (the
 default simulator options: no point below the floor, no contact that has to pull). The start:
 ``rest``, the model-1 posture q1..q5 at rest (the paper's setting); ``midstride``, the
-mid-stride state of ConstrainedBiped-v2 (:func:`~biped_constraint_env.env.midstride_start`:
+mid-stride start of the walking task (:func:`~biped_constraint_env.starts.midstride_start`:
 model 2, leg A on its toe, turning forward) with its rate, heel angle and lean searched, plus
 offsets on q1..q5. Score:
 100 x completed steps + 10 x cycle position (4 x steps + model - 1, the furthest reached)
-+ time inside the models [s]. Each population is one batch of the compiled simulator, with
++ time inside the models [s]. The search is ``cma``'s CMA-ES over the variables scaled by
+their initial spreads; each population is one batch of the compiled simulator, with
 the torque switching exactly at each model switch. The best table is written as an
 ``open_loop`` config (``best_open_loop.toml`` in the run directory; the committed copy is
 ``training/configs/open_loop_optimised.toml``) and re-checked through the env, with
@@ -30,12 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env import paper_biped
-from biped_constraint_env.env import (
-    NOMINAL_POSTURE_RAD,
-    TORQUE_LIMIT_NM,
-    midstride_start,
-    start_slots,
-)
+from biped_constraint_env.actions import TORQUE_LIMIT_NM
+from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start, start_slots
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimArrays, advance
 from training.common import make_run_dir, parse_config, progress
 
@@ -46,7 +43,6 @@ class OptimiseConfig:
 
     iterations: int = 300
     population: int = 512
-    elite: int = 16  # a small elite keeps the rare candidates that reach further
     restarts: int = 3  # independent searches (different seeds)
     seconds: float = 10.0  # simulated time per candidate [s]
     torque_sd_nm: float = 70.0  # initial spread of the torques
@@ -96,27 +92,31 @@ def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS, s
 
 
 def search(cfg: OptimiseConfig, seed: int, show: bool):
-    """One cross-entropy search; returns ((score, candidate, steps), history)."""
+    """One CMA-ES search; returns ((score, candidate, steps), history)."""
+    import cma
+
     rng = np.random.default_rng(seed)
     if cfg.start == "rest":
         mu0, sd0 = np.asarray(NOMINAL_POSTURE_RAD)[1:], np.full(5, cfg.posture_sd_rad)
-    else:  # v2's mean start: rate -1 rad/s, heel up 0.2 rad, lean 0.1 rad; no offsets
+    else:  # the walking task's mean start: rate -1 rad/s, heel up 0.2 rad, lean 0.1 rad
         mu0 = np.array([-1.0, -0.2, 0.1, 0, 0, 0, 0, 0])
         sd0 = np.array([0.5, 0.1, 0.1, *np.full(5, cfg.posture_sd_rad)])
     mu = np.concatenate([rng.normal(0, 30, 20), mu0])
     sd = np.concatenate([np.full(20, cfg.torque_sd_nm), sd0])
-    floor = np.concatenate([np.full(20, 2.0), np.full(len(mu0), 0.01)])
+    es = cma.CMAEvolutionStrategy(
+        np.zeros(len(mu)), 1.0, {"popsize": cfg.population, "seed": seed + 1, "verbose": -9}
+    )
     best = (-np.inf, None, 0)
     history = []
     for it in progress(range(cfg.iterations), cfg.iterations, f"search {seed}", show):
-        X = mu + sd * rng.standard_normal((cfg.population, len(mu)))
+        Z = np.array(es.ask())
+        X = mu + sd * Z
         X[:, :20] = np.clip(X[:, :20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)
         s, steps = score(X, cfg.seconds, start=cfg.start)
-        el = np.argsort(-s)[: cfg.elite]
-        if s[el[0]] > best[0]:
-            best = (float(s[el[0]]), X[el[0]].copy(), int(steps[el[0]]))
-        mu = 0.7 * mu + 0.3 * X[el].mean(0)
-        sd = 0.7 * sd + 0.3 * X[el].std(0) + floor
+        es.tell(list(Z), list(-s))
+        i = int(np.argmax(s))
+        if s[i] > best[0]:
+            best = (float(s[i]), X[i].copy(), int(steps[i]))
         history.append((it, float(s.max()), int(steps.max())))
     return best, history
 
@@ -153,7 +153,7 @@ def robustness(cfg, seeds: int = 10) -> tuple[dict, list[int]]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the searches and write the best table."""
     cfg = parse_config(OptimiseConfig, argv, __doc__.splitlines()[0])
-    rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v1", cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
     print(f"run directory: {rd}")
     results = []
     for r in range(cfg.restarts):

@@ -94,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             params, cfg.posture, table, reference.replace(strict=True), cfg.seconds
         ),
     }
-    rd = make_run_dir(cfg.out_dir, "paper_numerics", "ConstrainedBiped-v1", cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "paper_numerics", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -1,17 +1,68 @@
-"""Stable-Baselines3 vectorised environments for ConstrainedBiped-v1.
+"""Stable-Baselines3 vectorised environments for ConstrainedBiped-v0.
 
 :func:`make_sb3_vec_env` builds the batched vector env behind :class:`BatchedSB3VecEnv` (one
 compiled call steps every simulator), or SB3's own SubprocVecEnv / DummyVecEnv of single envs.
-Actions are in [-1, 1] for the policy and rescaled to N m.
+Actions are in [-1, 1] for the policy and become N m through one :class:`ActionMap`, the same
+object in the single and the batched env.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import json
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv as _SB3VecEnv
+
+from biped_constraint_env.actions import TORQUE_LIMIT_NM
+
+
+class ActionMap:
+    """Policy action in [-1, 1]^5 -> joint torques [N m], optionally on top of a controller.
+
+    Without a base: ``tau = gear * clip(a, -1, 1)``, ``gear`` [N m] per joint (a scalar or
+    (5,), at most the torque limit), as Walker2d's gear. With a base controller (a callable
+    ``base(obs (n, 24), residual=(n, 5))`` returning torques, e.g.
+    :class:`training.model_controller.ModelController`): ``tau = base(obs, residual=gear * a)``,
+    a learned residual on it.
+    """
+
+    def __init__(self, gear=TORQUE_LIMIT_NM, base=None, limit: float = TORQUE_LIMIT_NM):
+        """Map actions to torques (see the class docstring)."""
+        g = np.broadcast_to(np.asarray(gear, dtype=np.float64), (5,)).copy()
+        if not (np.all(np.isfinite(g)) and np.all(g > 0) and np.all(g <= limit)):
+            raise ValueError(f"gear must be 5 values in (0, {limit}] N m, got {gear!r}")
+        if base is not None and not callable(base):
+            raise ValueError(f"base must be a callable controller or None, got {base!r}")
+        self.gear, self.base, self.limit = g, base, float(limit)
+
+    def __call__(self, action: np.ndarray, obs: np.ndarray) -> np.ndarray:
+        """Torques (n, 5) for actions (n, 5) and the raw observations (n, 24) they answer."""
+        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * self.gear
+        if self.base is None:
+            return a
+        return np.clip(self.base(np.asarray(obs, np.float64), residual=a), -self.limit, self.limit)
+
+
+def action_map_from(base_controller: str, gear, limit: float = TORQUE_LIMIT_NM) -> ActionMap:
+    """The :class:`ActionMap` of a training config.
+
+    ``base_controller``: "" (none: the policy's torques alone), or ``"model"`` /
+    ``"model:GAINS.json"`` for :class:`training.model_controller.ModelController` (default
+    gains, or those overridden by the JSON file) with ``gear`` bounding the residual.
+    """
+    if not base_controller:
+        return ActionMap(gear, None, limit)
+    if base_controller == "model" or base_controller.startswith("model:"):
+        from training.model_controller import ModelController
+
+        path = base_controller.partition(":")[2]
+        gains = json.loads(Path(path).read_text()) if path else None
+        return ActionMap(gear, ModelController(gains, limit=limit), limit)
+    raise ValueError(f"base_controller must be '', 'model' or 'model:GAINS.json', got {base_controller!r}")
 
 
 def make_sb3_vec_env(
@@ -19,24 +70,22 @@ def make_sb3_vec_env(
     seed: int,
     env_kwargs: dict[str, Any],
     vec: str = "batched",
-    env_id: str = "ConstrainedBiped-v1",
+    env_id: str = "ConstrainedBiped-v0",
     action_map=None,
 ):
-    """An SB3 VecEnv of ConstrainedBiped-v1 with actions in [-1, 1] (rescaled to N m).
+    """An SB3 VecEnv of ConstrainedBiped-v0 with actions in [-1, 1] (mapped to N m).
 
     ``vec="batched"``: the batched vector env (all simulators in one compiled call) behind
     :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
-    ``"dummy"``: DummyVecEnv (one process). ``action_map``: a
-    :class:`training.fsm_controller.ActionMap` (default: plain rescaling by the torque limit).
+    ``"dummy"``: DummyVecEnv (one process). ``action_map``: an :class:`ActionMap` (default:
+    plain rescaling by the torque limit).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import biped_constraint_env  # noqa: F401
-    from biped_constraint_env.env import TORQUE_LIMIT_NM
-    from training.fsm_controller import ActionMap
 
     limit = float(env_kwargs.get("torque_limit_nm", TORQUE_LIMIT_NM))
-    action_map = action_map or ActionMap(limit)
+    action_map = action_map or ActionMap(limit, limit=limit)
     if vec == "batched":
         from gymnasium.vector import AutoresetMode
 
@@ -95,7 +144,7 @@ class BatchedSB3VecEnv(_SB3VecEnv):
     """Stable-Baselines3 VecEnv over the batched ConstrainedBiped vector env (SAME_STEP resets).
 
     Actions arrive in [-1, 1] and become N m through ``action_map`` (default: scaled by the
-    torque limit; or a residual on :mod:`training.fsm_controller`); a finished episode's
+    torque limit, or per joint, or a residual on a controller); a finished episode's
     last observation is ``infos[i]["terminal_observation"]`` and a time-limit end sets
     ``infos[i]["TimeLimit.truncated"]``, as SB3 expects. Each info also carries the env's
     ``steps_completed``, ``hip_y`` and ``termination_reason``.
@@ -105,11 +154,9 @@ class BatchedSB3VecEnv(_SB3VecEnv):
         """Wrap ``venv`` (a ConstrainedBipedVectorEnv in SAME_STEP autoreset mode)."""
         from gymnasium import spaces
 
-        from training.fsm_controller import ActionMap
-
         self.venv = venv
         self.limit = float(venv.single_action_space.high[0])
-        self.action_map = action_map or ActionMap(self.limit)
+        self.action_map = action_map or ActionMap(self.limit, limit=self.limit)
         self._obs = None
         super().__init__(
             venv.num_envs, venv.single_observation_space, spaces.Box(-1.0, 1.0, (5,), np.float32)

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env import paper_biped
-from biped_constraint_env.env import NOMINAL_POSTURE_RAD
+from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
 from biped_constraint_env.kinematics import link_angles
 from biped_constraint_env.modes import EventCode
 from biped_constraint_env.simulator import (
@@ -143,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     cfg = parse_config(StudyConfig, argv, __doc__.splitlines()[0])
     rng = np.random.default_rng(cfg.seed)
     postures = sample_postures(cfg.postures, rng)
-    rd = make_run_dir(cfg.out_dir, "table2_study", "ConstrainedBiped-v1", cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "table2_study", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
     print(f"run directory: {rd}")
     tables = np.repeat(TABLES["table2"][None] * SIGNS[:, None, :], len(postures), axis=0)
     qs = np.tile(postures, (len(SIGNS), 1))

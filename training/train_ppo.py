@@ -1,4 +1,4 @@
-"""Stable-Baselines3 PPO on ConstrainedBiped-v1.
+"""Stable-Baselines3 PPO on ConstrainedBiped-v0.
 
     python -m training.train_ppo [--config training/configs/ppo_default.toml] [--flag value ...]
     python -m training.train_ppo --resume runs/train_ppo/<run>   # continue from its checkpoint
@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from biped_constraint_env.actions import TORQUE_LIMIT_NM
 from training.common import make_run_dir, parse_config
 
 
@@ -30,8 +31,9 @@ from training.common import make_run_dir, parse_config
 class PPOConfig:
     """PPO settings (numbers that differ from SB3's defaults say why)."""
 
-    env_id: str = "ConstrainedBiped-v1"
-    preset: str = "fast"  # RK2 x 4: ~6x cheaper than the default RK4 x 16; evaluation uses the same
+    env_id: str = "ConstrainedBiped-v0"
+    task: str = "walk"  # the env's task ("walk" or "paper")
+    preset: str = "default"  # the accurate physics; evaluation always uses the same
     seed: int = 0
     total_timesteps: int = 3_000_000
     n_envs: int = 16  # one compiled batch: env stepping stays cheap next to the policy
@@ -58,15 +60,30 @@ class PPOConfig:
     switch_bonus: float = 1.0
     step_bonus: float = 5.0
     ctrl_cost_weight: float = 0.1
-    base_controller: str = ""  # a training.fsm_controller JSON: learn a residual on it ("" = none)
-    residual_scale: float = 1.0  # residual bound as a fraction of the torque limit (with a base)
+    base_controller: str = ""  # "model": learn a residual on the model controller ("" = none)
+    gear: tuple[float, ...] = (150.0,)  # N m per unit action, one value or one per joint
+    # imitation warm start (teacher "" = none): DART demonstrations of the model controller,
+    # DAgger rounds, behaviour cloning into the policy network PPO then trains
+    teacher: str = ""  # "model" or "model:GAINS.json": the model controller as the teacher
+    bc_episodes0: int = 40  # DART episodes of the teacher (round 0)
+    bc_noise_nm: float = 0.4  # std of the torque noise injected into every collected episode
+    bc_rounds: int = 10  # DAgger rounds (the student acts, the teacher labels)
+    bc_episodes: int = 30  # student episodes per DAgger round
+    bc_periods: int = 2000  # cap on control periods per collected episode (10 s)
+    bc_grad_steps: int = 20_000  # gradient steps of the first and last fit (a third in between)
+    bc_lr: float = 1e-3
+    bc_ankle_weight: float = 1.0  # weight of the stance ankle's error (the swing ankle: half)
+    action_std_nm: float = 0.0  # > 0: initial action std [N m] on every joint (overrides
+    # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
+    critic_warmup: int = 0  # rollouts at the start of PPO in which only the critic learns
     out_dir: Path = Path("runs")
     resume: str = ""  # a run directory to continue
     progress: bool = True
 
     def env_kwargs(self) -> dict:
-        """Keyword arguments of ConstrainedBiped-v1."""
+        """Keyword arguments of the env."""
         return {
+            "task": self.task,
             "preset": self.preset,
             "reset_noise_scale": self.reset_noise_scale,
             "step_bonus": self.step_bonus,
@@ -79,10 +96,10 @@ class PPOConfig:
 
     def action_map(self):
         """Policy action -> torque (plain rescaling, or a residual on the base controller)."""
-        from biped_constraint_env.env import TORQUE_LIMIT_NM
-        from training.fsm_controller import action_map_from
+        from training.sb3_vec import action_map_from
 
-        return action_map_from(self.base_controller, self.residual_scale, TORQUE_LIMIT_NM)
+        gear = self.gear[0] if len(self.gear) == 1 else self.gear
+        return action_map_from(self.base_controller, gear)
 
 
 def evaluate_policy_episodes(
@@ -128,6 +145,101 @@ def evaluate_policy_episodes(
     return out
 
 
+TRAIN_SEED_OFFSET = 1_000_000
+"""Training episodes draw their starts from seeds ``TRAIN_SEED_OFFSET + seed + i``,
+demonstrations from ``DEMO_SEED_OFFSET + ...``, the imitation and periodic evaluations from
+20,000 and 10,000 on: never from the final evaluation's seeds (0, 1, ... in evaluate)."""
+DEMO_SEED_OFFSET = 2_000_000
+
+
+def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
+    """DART demonstrations and DAgger rounds of the teacher, cloned into a new PPO model.
+
+    ``make_model(mean, var)`` builds the PPO model whose policy normalises observations by
+    those statistics (of the demonstrations). Writes ``imitation.csv`` (one row per round:
+    data size, fit error, steps of 5 student episodes) into ``run``; returns the model.
+    """
+    import gymnasium as gym
+
+    from training import imitation
+    from training.sb3_vec import action_map_from
+
+    env = gym.make(cfg.env_id, **cfg.env_kwargs()).unwrapped
+    teacher = action_map_from(cfg.teacher, TORQUE_LIMIT_NM).base
+    gear = cfg.action_map().gear
+    weights = np.array([cfg.bc_ankle_weight, 1, 1, 1, max(1.0, cfg.bc_ankle_weight / 2)])
+    rng = np.random.default_rng(cfg.seed)
+    seed = DEMO_SEED_OFFSET + 100_000 * cfg.seed
+    t0 = time.time()
+    print(f"imitation: {cfg.bc_episodes0} noisy teacher episodes (DART)", flush=True)
+    demo = imitation.collect(
+        env, teacher, gear, list(range(seed, seed + cfg.bc_episodes0)), cfg.bc_periods,
+        cfg.bc_noise_nm, rng=rng,
+    )
+    seed += cfg.bc_episodes0
+    data = demo.data
+    model = make_model(*imitation.obs_statistics(data.obs))
+    rows = []
+    for k in range(cfg.bc_rounds + 1):
+        full = k in (0, cfg.bc_rounds)
+        steps = cfg.bc_grad_steps if full else cfg.bc_grad_steps // 3
+        epochs = max(1, round(steps * 512 / len(data)))
+        mse = imitation.fit(
+            model.policy, data, epochs, lr=cfg.bc_lr, seed=cfg.seed + k, weights=weights
+        )
+        student = imitation.student_fn(model.policy)
+        check = imitation.collect(env, teacher, gear, list(range(20_000, 20_005)), 6000,
+                                  student=student)
+        rows.append({"round": k, "samples": len(data), "mse": mse,
+                     "student_steps": json.dumps(check.steps), "wall_s": round(time.time() - t0)})
+        print(f"imitation round {k}: {len(data)} samples, mse {mse:.2e}, student steps "
+              f"{check.steps} ({time.time() - t0:.0f} s)", flush=True)
+        if k == cfg.bc_rounds:
+            break
+        more = imitation.collect(
+            env, teacher, gear, list(range(seed, seed + cfg.bc_episodes)), cfg.bc_periods,
+            cfg.bc_noise_nm, student=student, rng=rng,
+        )
+        seed += cfg.bc_episodes
+        data = data + more.data
+    with open(run / "imitation.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return model
+
+
+def _critic_warmup(cfg: PPOConfig):
+    """A callback that freezes the actor for the first ``cfg.critic_warmup`` rollouts."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class CriticWarmup(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.rollouts = 0
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            self.rollouts += 1
+            p = self.model.policy
+            frozen = self.rollouts <= cfg.critic_warmup
+            for param in [*p.mlp_extractor.policy_net.parameters(), *p.action_net.parameters(),
+                          p.log_std]:
+                param.requires_grad_(not frozen)
+
+    return CriticWarmup()
+
+
+def save(model, vecnorm, where: Path) -> None:
+    """Write model.zip, vecnormalize.pkl and num_timesteps.txt into ``where``."""
+    where.mkdir(exist_ok=True)
+    model.save(where / "model.zip")
+    vecnorm.save(str(where / "vecnormalize.pkl"))
+    (where / "num_timesteps.txt").write_text(str(model.num_timesteps))
+
+
 def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -159,10 +271,7 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
             return True
 
         def _save(self, where: Path):
-            where.mkdir(exist_ok=True)
-            self.model.save(where / "model.zip")
-            vecnorm.save(str(where / "vecnormalize.pkl"))
-            (where / "num_timesteps.txt").write_text(str(self.model.num_timesteps))
+            save(self.model, vecnorm, where)
 
         def _evaluate(self, n):
             eps = evaluate_policy_episodes(self.model, vecnorm, cfg, cfg.eval_episodes, 10_000)
@@ -235,7 +344,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
     venv = make_sb3_vec_env(
-        cfg.n_envs, cfg.seed, cfg.env_kwargs(), cfg.vec, cfg.env_id, cfg.action_map()
+        cfg.n_envs, TRAIN_SEED_OFFSET + cfg.seed, cfg.env_kwargs(), cfg.vec, cfg.env_id,
+        cfg.action_map(),
     )
     start = 0
     if cfg.resume:
@@ -250,29 +360,49 @@ def main(argv: Sequence[str] | None = None) -> int:
         model = PPO.load(run / "checkpoints" / "model.zip", env=vecnorm, device="cpu")
         print(f"resuming at {model.num_timesteps} env steps", flush=True)
     else:
-        vecnorm = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=cfg.gamma)
-        model = PPO(
-            "MlpPolicy",
-            vecnorm,
-            n_steps=cfg.n_steps,
-            batch_size=cfg.batch_size,
-            n_epochs=cfg.n_epochs,
-            learning_rate=cfg.learning_rate,
-            gamma=cfg.gamma,
-            gae_lambda=cfg.gae_lambda,
-            clip_range=cfg.clip_range,
-            ent_coef=cfg.ent_coef,
-            policy_kwargs={"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init},
-            seed=cfg.seed,
-            device="cpu",
-            tensorboard_log=str(run / "tb"),
-            verbose=0,
+        # with a teacher the policy normalises observations itself (fixed statistics)
+        vecnorm = VecNormalize(
+            venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma
         )
+
+        def make_model(mean=None, var=None):
+            policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init}
+            if mean is not None:
+                from training.imitation import FixedNormalizer
+
+                policy_kwargs.update(
+                    features_extractor_class=FixedNormalizer,
+                    features_extractor_kwargs={"mean": mean.tolist(), "var": var.tolist()},
+                )
+            return PPO(
+                "MlpPolicy",
+                vecnorm,
+                n_steps=cfg.n_steps,
+                batch_size=cfg.batch_size,
+                n_epochs=cfg.n_epochs,
+                learning_rate=cfg.learning_rate,
+                gamma=cfg.gamma,
+                gae_lambda=cfg.gae_lambda,
+                clip_range=cfg.clip_range,
+                ent_coef=cfg.ent_coef,
+                policy_kwargs=policy_kwargs,
+                seed=cfg.seed,
+                device="cpu",
+                tensorboard_log=str(run / "tb"),
+                verbose=0,
+            )
+
+        model = imitation_warm_start(cfg, run, make_model) if cfg.teacher else make_model()
+        if cfg.action_std_nm > 0:
+            gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
+            model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
+        if cfg.teacher:  # the imitation result alone, for comparison
+            save(model, vecnorm, run / "imitation")
     remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
     t0 = time.time()
     model.learn(
         total_timesteps=remaining,
-        callback=_callbacks(cfg, run, vecnorm),
+        callback=[_callbacks(cfg, run, vecnorm), _critic_warmup(cfg)],
         progress_bar=cfg.progress,
         reset_num_timesteps=not cfg.resume,
     )

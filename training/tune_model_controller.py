@@ -1,16 +1,18 @@
-"""Tune the model-based controller's gains by a cross-entropy search over many starts.
+"""Tune the model-based controller's gains by CMA-ES (``cma``) over many starts.
 
     python -m training.tune_model_controller [--iterations 10] [--population 24] [--cap 12]
-        [--init gains.json] [--out results/tune_mc] [--workers 2]
+        [--init gains.json] [--noise 0.5] [--out results/tune_mc] [--workers 2]
 
 Every candidate (a dict of :data:`training.model_controller.DEFAULT_GAINS` overrides) runs
 through the env (default physics, strict, ``dt=0.005``, ``stop_at_switch=True``) from every
 start of :data:`STARTS` (mid-stride model-2 states: turning rate about the stance toe and
-heel-up angle), until it falls or completes ``cap`` steps. Score: the mean of the completed
-steps over the starts, plus 0.2 x their minimum (a robust gait counts more than one lucky
-start). The search samples each tuned gain from a normal within :data:`BOUNDS`, keeps the best
-quarter, refits mean and spread, and writes ``best_gains.json`` (the best candidate seen) and
-``history.csv`` (one row per candidate) into ``--out``.
+heel-up angle), until it falls or completes ``cap`` steps. With ``--noise`` the executed
+torques carry Gaussian noise of that std [N m] (seeded per start, the same for every
+candidate): a gait that tolerates it is a better teacher for a network, whose errors it then
+tolerates too. Score: the mean of the completed steps over the starts, plus 0.2 x their
+minimum (a robust gait counts more than one lucky start). CMA-ES searches the tuned gains
+scaled to [0, 1] within :data:`BOUNDS` and writes ``best_gains.json`` (the best candidate
+seen) and ``history.csv`` (one row per candidate) into ``--out``.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import json
 from multiprocessing import Pool
 from pathlib import Path
 
+import cma
 import numpy as np
 
 from training.common import progress
@@ -74,12 +77,31 @@ STARTS: tuple[tuple[float, float], ...] = (
 """(rate [rad/s], theta0 [rad]) of :func:`midstride_state` for every scored start."""
 
 
-def run_start(gains: dict[str, float], rate: float, theta0: float, cap: int, dt: float = 0.005):
-    """(completed steps, hip travel [m], termination reason) of one start, at most ``cap`` steps."""
+def run_start(
+    gains: dict[str, float],
+    rate: float,
+    theta0: float,
+    cap: int,
+    dt: float = 0.005,
+    noise_nm: float = 0.0,
+    noise_seed: int = 0,
+):
+    """(completed steps, hip travel [m], termination reason) of one start, at most ``cap`` steps.
+
+    ``noise_nm``: std of Gaussian noise on the executed torques [N m] (generator ``noise_seed``).
+    """
     from biped_constraint_env.env import ConstrainedBipedEnv
 
     env = ConstrainedBipedEnv(dt=dt, stop_at_switch=True)
     ctl = ModelController(gains, env.params, env.options)
+    if noise_nm > 0:
+        rng = np.random.default_rng(noise_seed)
+        limit = env.torque_limit_nm
+        base = ctl
+
+        def ctl(obs):
+            return np.clip(base(obs) + noise_nm * rng.standard_normal(5), -limit, limit)
+
     s = midstride_state(rate, theta0)
     opts = dict(q=s.q, qd=s.qd, mode=2)
     steps, dist, reason, _ = run_episode(env, ctl, opts, max_periods=int(60.0 / dt), cap=cap)
@@ -104,6 +126,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--cap", type=int, default=12, help="steps at which a start counts as done")
     ap.add_argument("--init", type=Path, help="gains JSON to start the search mean from")
     ap.add_argument("--sigma", type=float, default=0.15, help="initial spread / range width")
+    ap.add_argument("--noise", type=float, default=0.0, help="torque noise std [N m]")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--starts", type=int, default=len(STARTS), help="score the first N starts")
@@ -111,6 +134,8 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     if a.iterations < 1 or a.population < 4 or a.cap < 1 or a.workers < 1 or a.sigma <= 0:
         ap.error("need iterations >= 1, population >= 4, cap >= 1, workers >= 1, sigma > 0")
+    if not (np.isfinite(a.noise) and a.noise >= 0):
+        ap.error(f"--noise must be >= 0, got {a.noise}")
     if not 1 <= a.starts <= len(STARTS):
         ap.error(f"--starts must be in 1..{len(STARTS)}")
     starts = STARTS[: a.starts]
@@ -118,38 +143,36 @@ def main(argv: list[str] | None = None) -> None:
     names = list(BOUNDS)
     lo = np.array([BOUNDS[n][0] for n in names])
     hi = np.array([BOUNDS[n][1] for n in names])
-    mean = np.clip([init[n] for n in names], lo, hi)
-    sig = a.sigma * (hi - lo)
-    rng = np.random.default_rng(a.seed)
+    x0 = (np.clip([init[n] for n in names], lo, hi) - lo) / (hi - lo)
+    es = cma.CMAEvolutionStrategy(
+        x0, a.sigma, {"popsize": a.population, "bounds": [0, 1], "seed": a.seed + 1, "verbose": -9}
+    )
     a.out.mkdir(parents=True, exist_ok=True)
     best = (-np.inf, dict(init))
     rows = []
-    n_elite = max(2, a.population // 4)
+    header = ["iteration", "score", *[f"start{i}" for i in range(len(starts))], *names]
     with Pool(a.workers) as pool:
-        for it in progress(range(a.iterations), a.iterations, "CEM"):
-            cands = [mean] + [
-                np.clip(mean + sig * rng.standard_normal(len(names)), lo, hi)
-                for _ in range(a.population - 1)
+        for it in progress(range(a.iterations), a.iterations, "CMA-ES"):
+            cands = [np.asarray(c) for c in es.ask()]
+            gains = [
+                {**init, **dict(zip(names, map(float, lo + c * (hi - lo)), strict=True))}
+                for c in cands
             ]
-            gains = [{**init, **dict(zip(names, map(float, c), strict=True))} for c in cands]
-            jobs = [(g, r, th, a.cap) for g in gains for r, th in starts]
+            jobs = [
+                (g, r, th, a.cap, 0.005, a.noise, k)
+                for g in gains
+                for k, (r, th) in enumerate(starts)
+            ]
             res = pool.map(_job, jobs, chunksize=1)
             per = [res[i * len(starts) : (i + 1) * len(starts)] for i in range(len(cands))]
             scores = np.array([score(r) for r in per])
+            es.tell(cands, list(-scores))
             for g, r, sc in zip(gains, per, scores, strict=True):
                 rows.append([it, sc, *[x[0] for x in r], *[g[n] for n in names]])
                 if sc > best[0]:
                     best = (sc, g)
-            elite = np.argsort(-scores)[:n_elite]
-            mean = np.mean([cands[i] for i in elite], axis=0)
-            sig = np.maximum(np.std([cands[i] for i in elite], axis=0), 0.01 * (hi - lo))
-            print(
-                f"iteration {it}: best {scores.max():.2f} (mean-gain candidate "
-                f"{scores[0]:.2f}), best so far {best[0]:.2f}",
-                flush=True,
-            )
+            print(f"iteration {it}: best {scores.max():.2f}, best so far {best[0]:.2f}", flush=True)
             (a.out / "best_gains.json").write_text(json.dumps(best[1], indent=1) + "\n")
-            header = ["iteration", "score", *[f"start{i}" for i in range(len(starts))], *names]
             np.savetxt(
                 a.out / "history.csv",
                 np.array(rows),

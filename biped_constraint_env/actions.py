@@ -1,0 +1,41 @@
+"""The action: five joint torques [N m], validated the same way in the single and vector env."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .model import N_ACTUATED
+
+TORQUE_LIMIT_NM = 150.0
+"""Default action bound [N m] (>= 120 so that Table 2 fits)."""
+
+
+def validate_actions(actions: Any, limit: float, out_of_range: str) -> np.ndarray:
+    """(..., 5) float64 torques [N m]; ValueError on NaN/inf/shape/dtype/range (as documented)."""
+    a = actions if isinstance(actions, np.ndarray) else np.asarray(actions)
+    if a.shape[-1:] != (N_ACTUATED,):
+        raise ValueError(f"action must have shape ({N_ACTUATED},), got {a.shape}")
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"action must be real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64)
+    if a.ndim == 1:  # a comparison with NaN is False, so this screens NaN, inf and range
+        inside = all(-limit <= x <= limit for x in a.tolist())
+    else:
+        inside = np.abs(a).max() <= limit  # NaN propagates through max
+    if not inside:
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite, got {a}")
+        if out_of_range == "raise":
+            raise ValueError(f"action {a} exceeds the torque limit +-{limit} N m")
+        a = np.clip(a, -limit, limit)
+    return a
+
+
+def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
+    """(5,) float64 torques [N m] from one action (see :func:`validate_actions`)."""
+    a = action if isinstance(action, np.ndarray) else np.asarray(action)
+    if a.shape != (N_ACTUATED,):
+        raise ValueError(f"action must have shape ({N_ACTUATED},), got {a.shape}")
+    return validate_actions(a, limit, out_of_range)

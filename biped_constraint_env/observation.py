@@ -1,0 +1,99 @@
+"""The 24-entry observation, filled by one compiled function for the single and vector env."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+from numba import njit
+
+from .hybrid import nb_wrap
+from .kinematics import NK, nb_hip_kinematics
+from .model import N_LINKS
+
+OBS_RATE_LIMIT_RAD_S = 1e3
+"""Bound of the joint-rate observations [rad/s] (values beyond are clipped; with the damping of
+10 N m s/rad and 150 N m torques, steady rates stay below ~50 rad/s)."""
+OBS_LENGTH_LIMIT_M = 10.0
+"""Bound of the hip-position observations [m] (the legs are 3 m long)."""
+OBS_SPEED_LIMIT_M_S = 1e3
+"""Bound of the hip-velocity observations [m/s]."""
+OBS_FORCE_LIMIT_N = 1e5
+"""Bound of the contact-force observations [N] (the robot weighs 49 N)."""
+OBS_DIM = 24
+OBS_NAMES: tuple[str, ...] = (
+    "theta0",
+    "q1",
+    "q2",
+    "q3",
+    "q4",
+    "q5",
+    "theta0_dot",
+    "q1_dot",
+    "q2_dot",
+    "q3_dot",
+    "q4_dot",
+    "q5_dot",
+    "hip_y_rel_stance_toe",
+    "hip_z",
+    "hip_vy",
+    "hip_vz",
+    "stance_side",
+    "mode_1",
+    "mode_2",
+    "mode_3",
+    "mode_4",
+    "f_stance_toe",
+    "f_stance_heel",
+    "f_contact_normal",
+)
+"""Observation entries, in order (see the env docstring's table)."""
+
+
+def _obs_bounds() -> tuple[np.ndarray, np.ndarray]:
+    high = np.empty(OBS_DIM)
+    high[:6] = np.pi
+    high[6:12] = OBS_RATE_LIMIT_RAD_S
+    high[12:14] = OBS_LENGTH_LIMIT_M
+    high[14:16] = OBS_SPEED_LIMIT_M_S
+    high[16:21] = 1.0
+    high[21:24] = OBS_FORCE_LIMIT_N
+    low = -high
+    low[16:21] = 0.0
+    return low, high
+
+
+OBS_LOW, OBS_HIGH = _obs_bounds()
+
+
+@njit(cache=True)
+def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
+    """Fill OBS (n, 24), clipped to [low, high], and HIP (n, 4: hip y, z, vy, vz)."""
+    K = np.empty((N_LINKS, NK))
+    for i in range(Q.shape[0]):
+        side = IST[i, 1]
+        mode = IST[i, 0]
+        hy, hz, hvy, hvz = nb_hip_kinematics(chs[side], Q[i], QD[i], FST[i, 1], K)
+        HIP[i, 0] = hy
+        HIP[i, 1] = hz
+        HIP[i, 2] = hvy
+        HIP[i, 3] = hvz
+        for j in range(6):
+            OBS[i, j] = nb_wrap(Q[i, j])  # angles, so wrapped to (-pi, pi]
+            OBS[i, 6 + j] = QD[i, j]
+        OBS[i, 12] = hy - FST[i, 1]
+        OBS[i, 13] = hz
+        OBS[i, 14] = hvy
+        OBS[i, 15] = hvz
+        OBS[i, 16] = side
+        for m in range(4):
+            OBS[i, 17 + m] = 1.0 if mode == m + 1 else 0.0
+        OBS[i, 21] = FORCES[i, 0]
+        OBS[i, 22] = FORCES[i, 1]
+        OBS[i, 23] = FORCES[i, 2]
+        for j in range(OBS.shape[1]):
+            OBS[i, j] = min(max(OBS[i, j], low[j]), high[j])
+
+
+def observation_space() -> spaces.Box:
+    """The observation Box (bounds in the env docstring's table)."""
+    return spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float64)

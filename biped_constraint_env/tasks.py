@@ -1,0 +1,56 @@
+"""Tasks and fidelity presets, as data: the env's defaults and the paper's setting.
+
+A *task* fixes the control period, the start distribution, whether a period ends at a model
+switch, and the fidelity preset; every one of these stays a keyword argument of the env that
+overrides the task's value.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .simulator import DEFAULT_OPTIONS, FAST_OPTIONS, PAPER_OPTIONS, SimOptions
+from .units import PAPER_SAMPLE_TIME_S
+
+PRESETS: dict[str, SimOptions] = {
+    "default": DEFAULT_OPTIONS,
+    "fast": FAST_OPTIONS,
+    "paper": PAPER_OPTIONS,
+}
+"""Fidelity presets: the accurate defaults (RK4 x 16 per 20 ms), the ~6x cheaper "fast"
+(RK2 x 4; fails the accuracy rule over a walking cycle) and the paper's own numerical choices."""
+
+TASKS: dict[str, dict[str, Any]] = {
+    "walk": {"preset": "default", "dt": 0.005, "stop_at_switch": True, "start": "midstride"},
+    "paper": {
+        "preset": "paper",
+        "dt": PAPER_SAMPLE_TIME_S,
+        "stop_at_switch": False,
+        "start": "rest",
+    },
+}
+"""``task="walk"`` (default): accurate physics, 5 ms control, a period ends at each model switch
+(the torque changes there, as in the paper), mid-stride start. ``task="paper"``: the paper's
+setting (its numerics, 20 ms, torques held through switches, start at rest in model 1)."""
+
+MAX_EPISODE_STEPS = 6000
+"""Time limit in control periods at registration (6000 x 5 ms = 30 s of the walking task)."""
+
+
+def resolve_task(task: str, **overrides: Any) -> dict[str, Any]:
+    """The task's settings with the explicitly given ones (not None) on top."""
+    if task not in TASKS:
+        raise ValueError(f"task must be one of {sorted(TASKS)}, got {task!r}")
+    return {**TASKS[task], **{k: v for k, v in overrides.items() if v is not None}}
+
+
+def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOptions:
+    """The simulator options of a preset with per-option overrides (None = keep)."""
+    if preset not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
+    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a finite number > 0 [s], got {dt!r}")
+    changes = {k: v for k, v in overrides.items() if v is not None}
+    return PRESETS[preset].replace(**changes)
