@@ -1,5 +1,6 @@
 """One direction of dependency: model -> kinematics -> dynamics -> contact -> modes -> hybrid
--> simulator -> env. Each module may import only modules of lower or equal rank."""
+-> simulator -> (the env's parts: tasks, actions, starts, rewards, observation) -> env ->
+vector_env. Each module may import only modules of lower or equal rank."""
 
 import ast
 from pathlib import Path
@@ -20,6 +21,11 @@ LAYERS = [
     "hybrid",
     "simulator",
     "render",
+    "tasks",
+    "actions",
+    "starts",
+    "rewards",
+    "observation",
     "env",
     "vector_env",
     "__init__",

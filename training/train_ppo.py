@@ -69,7 +69,8 @@ class PPOConfig:
     bc_noise_nm: float = 0.4  # std of the torque noise injected into every collected episode
     bc_rounds: int = 10  # DAgger rounds (the student acts, the teacher labels)
     bc_episodes: int = 30  # student episodes per DAgger round
-    bc_periods: int = 2000  # cap on control periods per collected episode (10 s)
+    bc_periods0: int = 2000  # cap on control periods per DART episode (10 s)
+    bc_periods: int = 600  # cap per DAgger episode: short, so rounds dwell on the start transient
     bc_grad_steps: int = 20_000  # gradient steps of the first and last fit (a third in between)
     bc_lr: float = 1e-3
     bc_ankle_weight: float = 1.0  # weight of the stance ankle's error (the swing ankle: half)
@@ -173,7 +174,7 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     t0 = time.time()
     print(f"imitation: {cfg.bc_episodes0} noisy teacher episodes (DART)", flush=True)
     demo = imitation.collect(
-        env, teacher, gear, list(range(seed, seed + cfg.bc_episodes0)), cfg.bc_periods,
+        env, teacher, gear, list(range(seed, seed + cfg.bc_episodes0)), cfg.bc_periods0,
         cfg.bc_noise_nm, rng=rng,
     )
     seed += cfg.bc_episodes0
