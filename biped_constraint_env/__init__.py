@@ -10,7 +10,6 @@ import gymnasium
 
 from .model import BipedParams, ChainModel, LinkParams, chain_for, paper_biped
 from .modes import MODE_TABLE, EventCode, Mode
-from .tasks import MAX_EPISODE_STEPS, PRESETS, TASKS
 from .simulator import (
     DEFAULT_OPTIONS,
     FAST_OPTIONS,
@@ -23,6 +22,7 @@ from .simulator import (
     rollout,
     step,
 )
+from .tasks import MAX_EPISODE_STEPS, PRESETS, TASKS
 
 __version__ = "0.1.0"
 

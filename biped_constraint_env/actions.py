@@ -39,3 +39,16 @@ def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
     if a.shape != (N_ACTUATED,):
         raise ValueError(f"action must have shape ({N_ACTUATED},), got {a.shape}")
     return validate_actions(a, limit, out_of_range)
+
+
+def check_action_settings(torque_limit_nm: float, out_of_range: str) -> tuple[float, str]:
+    """The validated torque limit [N m] and out-of-range policy of an env."""
+    if not (
+        isinstance(torque_limit_nm, (int, float))
+        and np.isfinite(torque_limit_nm)
+        and torque_limit_nm > 0
+    ):
+        raise ValueError(f"torque_limit_nm must be finite and > 0, got {torque_limit_nm!r}")
+    if out_of_range not in ("clip", "raise"):
+        raise ValueError(f"out_of_range must be 'clip' or 'raise', got {out_of_range!r}")
+    return float(torque_limit_nm), out_of_range

@@ -13,17 +13,19 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .actions import TORQUE_LIMIT_NM, validate_action
-from .model import N_ACTUATED, N_LINKS, BipedParams, paper_biped
+from .actions import TORQUE_LIMIT_NM, check_action_settings, validate_action
+from .model import N_ACTUATED, BipedParams, paper_biped
 from .modes import EventCode
 from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe, observation_space
 from .rewards import (
     REWARD_TERMS,
     TERMINATION_FALL,
     TERMINATION_NON_FINITE,
+    check_fall_height,
     cycle_position,
     fallen,
     reward_terms,
+    reward_weights,
 )
 from .simulator import (
     STATUS_NONFINITE,
@@ -37,7 +39,7 @@ from .simulator import (
 from .starts import (
     NOMINAL_POSTURE_RAD,
     RESET_NOISE_SCALE_RAD,
-    STARTS,
+    check_start_settings,
     check_start_state,
     sample_start,
     start_sampled,
@@ -150,11 +152,13 @@ class ConstrainedBipedEnv(gym.Env):
     | dt | 0.005 | 0.02 | control period [s] |
     | stop_at_switch | True | False | end a period just after a model switch |
     | start | "midstride" | "rest" | start distribution (Starting State) |
-    | integrator, substeps, impact, locate_events, jdot, strict, heel_force_includes_foot_weight | None | | override one option of the preset (``SimOptions``) |
+    | integrator, substeps, impact, locate_events, jdot, strict, | None | | override one |
+    | heel_force_includes_foot_weight | | | option of the preset (``SimOptions``) |
     | params | paper_biped() | | the robot (``BipedParams``) |
     | torque_limit_nm | 150 | | action bound [N m] |
     | out_of_range | "clip" | | "clip" or "raise" |
-    | forward_reward_weight, alive_bonus, switch_bonus, step_bonus, ctrl_cost_weight | 1, 0.5, 1, 5, 0.1 | | reward weights (Rewards) |
+    | forward_reward_weight, alive_bonus, switch_bonus, | 1, 0.5, 1, | | reward weights |
+    | step_bonus, ctrl_cost_weight | 5, 0.1 | | (Rewards) |
     | reset_noise_scale | 0.01 | | uniform noise on q1..q5 [rad] |
     | fall_hip_height_m | None | | end the episode when the hip is below [m] |
     | posture | NOMINAL_POSTURE_RAD | | start posture of ``start="rest"`` [rad] |
@@ -224,46 +228,20 @@ class ConstrainedBipedEnv(gym.Env):
             ),
         )
         self.dt = float(dt)
-        if not (np.isfinite(torque_limit_nm) and torque_limit_nm > 0):
-            raise ValueError(f"torque_limit_nm must be finite and > 0, got {torque_limit_nm!r}")
-        if out_of_range not in ("clip", "raise"):
-            raise ValueError(f"out_of_range must be 'clip' or 'raise', got {out_of_range!r}")
-        for name, v in (
-            ("forward_reward_weight", forward_reward_weight),
-            ("step_bonus", step_bonus),
-            ("ctrl_cost_weight", ctrl_cost_weight),
-            ("reset_noise_scale", reset_noise_scale),
-        ):
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        self.torque_limit_nm, self.out_of_range = check_action_settings(
+            torque_limit_nm, out_of_range
+        )
+        self.weights = reward_weights(
+            forward_reward_weight, alive_bonus, switch_bonus, step_bonus, ctrl_cost_weight
+        )
+        self.fall_hip_height_m = check_fall_height(fall_hip_height_m)
+        self.start, self.posture, self.reset_noise_scale = check_start_settings(
+            self.params, start, posture, reset_noise_scale
+        )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
-        self.posture = np.asarray(posture, dtype=np.float64)
-        if self.posture.shape != (N_LINKS,):
-            raise ValueError(f"posture must have shape ({N_LINKS},), got {self.posture.shape}")
-        check_start_state(self.params, SimState(0.0, 1, 0, self.posture, np.zeros(N_LINKS)))
-        self.torque_limit_nm = float(torque_limit_nm)
-        self.out_of_range = out_of_range
-        self.weights = (
-            float(forward_reward_weight),
-            float(alive_bonus),
-            float(switch_bonus),
-            float(step_bonus),
-            float(ctrl_cost_weight),
-        )
-        self.reset_noise_scale = float(reset_noise_scale)
-        if start not in STARTS:
-            raise ValueError(f"start must be one of {STARTS}, got {start!r}")
-        self.start = start
-        if fall_hip_height_m is not None and not (
-            isinstance(fall_hip_height_m, (int, float)) and np.isfinite(fall_hip_height_m)
-        ):
-            raise ValueError(
-                f"fall_hip_height_m must be a finite number or None, got {fall_hip_height_m!r}"
-            )
-        self.fall_hip_height_m = None if fall_hip_height_m is None else float(fall_hip_height_m)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
         self.action_space = spaces.Box(

@@ -59,3 +59,32 @@ def reward_terms(
         w_step * steps,
         -w_ctrl * tau_sq / (limit * limit),
     )
+
+
+def reward_weights(
+    forward: float, alive: float, switch: float, step: float, ctrl: float
+) -> tuple[float, ...]:
+    """The validated reward weights (each a finite number >= 0), in REWARD_TERMS order."""
+    names = (
+        "forward_reward_weight",
+        "alive_bonus",
+        "switch_bonus",
+        "step_bonus",
+        "ctrl_cost_weight",
+    )
+    values = (forward, alive, switch, step, ctrl)
+    for name, v in zip(names, values, strict=True):
+        if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+    return tuple(float(v) for v in values)
+
+
+def check_fall_height(fall_hip_height_m) -> float | None:
+    """The validated fall height [m] (None: off)."""
+    if fall_hip_height_m is None:
+        return None
+    if not (isinstance(fall_hip_height_m, (int, float)) and np.isfinite(fall_hip_height_m)):
+        raise ValueError(
+            f"fall_hip_height_m must be a finite number or None, got {fall_hip_height_m!r}"
+        )
+    return float(fall_hip_height_m)

@@ -659,8 +659,9 @@ def nb_advance(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, f
 
 
 @njit(cache=True)
-def _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV,
-                   lo, hi):
+def _advance_range(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, lo, hi
+):
     """:func:`nb_advance_w` over rows lo..hi-1 with one workspace; rows with STATUS != 0 skip."""
     W = nb_make_work()
     S = nb_make_scratch()
@@ -668,26 +669,62 @@ def _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FOR
         if STATUS[i] != 0:
             NEV[i] = 0
             continue
-        STATUS[i], NEV[i] = nb_advance_w(chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt,
-                                         fopt, a, b, EV[i], FORCES[i], W, S)
+        STATUS[i], NEV[i] = nb_advance_w(
+            chs,
+            scs,
+            Q[i],
+            QD[i],
+            IST[i],
+            FST[i],
+            TAU[i],
+            dt,
+            iopt,
+            fopt,
+            a,
+            b,
+            EV[i],
+            FORCES[i],
+            W,
+            S,
+        )
 
 
 @njit(cache=True)
 def nb_advance_batch(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV):
     """:func:`nb_advance_w` over N simulators (rows of every array); skips rows with STATUS != 0."""
-    _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV,
-                   0, Q.shape[0])
+    _advance_range(
+        chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, 0, Q.shape[0]
+    )
 
 
 @njit(cache=True, parallel=True)
-def nb_advance_batch_parallel(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES,
-                              STATUS, NEV, nt):
+def nb_advance_batch_parallel(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, nt
+):
     """:func:`nb_advance_batch` split into ``nt`` chunks, one per thread (same results)."""
     n = Q.shape[0]
     chunk = (n + nt - 1) // nt
     for c in numba.prange(nt):
-        _advance_range(chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS,
-                       NEV, c * chunk, min(n, (c + 1) * chunk))
+        _advance_range(
+            chs,
+            scs,
+            Q,
+            QD,
+            IST,
+            FST,
+            TAU,
+            dt,
+            iopt,
+            fopt,
+            a,
+            b,
+            EV,
+            FORCES,
+            STATUS,
+            NEV,
+            c * chunk,
+            min(n, (c + 1) * chunk),
+        )
 
 
 PARALLEL_MIN_BATCH = 8

@@ -163,3 +163,24 @@ def check_start_state(params: BipedParams, state: SimState) -> None:
             raise ValueError(
                 f"model {int(m)} holds the {name} at z = 0, got z = {pts[name][1]:.3g} m"
             )
+
+
+def check_start_settings(
+    params: BipedParams, start: str, posture, reset_noise_scale: float
+) -> tuple[str, np.ndarray, float]:
+    """The validated start kind, rest posture (6,) [rad] and noise scale [rad] of an env."""
+    if start not in STARTS:
+        raise ValueError(f"start must be one of {STARTS}, got {start!r}")
+    if not (
+        isinstance(reset_noise_scale, (int, float))
+        and np.isfinite(reset_noise_scale)
+        and reset_noise_scale >= 0
+    ):
+        raise ValueError(
+            f"reset_noise_scale must be a finite number >= 0, got {reset_noise_scale!r}"
+        )
+    q = np.asarray(posture, dtype=np.float64)
+    if q.shape != (N_LINKS,):
+        raise ValueError(f"posture must have shape ({N_LINKS},), got {q.shape}")
+    check_start_state(params, SimState(0.0, 1, 0, q, np.zeros(N_LINKS)))
+    return start, q, float(reset_noise_scale)

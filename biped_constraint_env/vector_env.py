@@ -19,6 +19,7 @@ from gymnasium.vector.utils import batch_space
 
 from .actions import validate_actions
 from .env import ConstrainedBipedEnv
+from .model import N_ACTUATED
 from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe
 from .rewards import (
     REWARD_TERMS,
@@ -28,10 +29,9 @@ from .rewards import (
     fallen,
     reward_terms,
 )
+from .simulator import STATUS_NONFINITE, STATUS_TERMINATED, SimArrays, advance, evaluate
 from .starts import check_start_state, sample_start, start_sampled, state_from_options
 from .tasks import MAX_EPISODE_STEPS
-from .model import N_ACTUATED
-from .simulator import STATUS_NONFINITE, STATUS_TERMINATED, SimArrays, advance, evaluate
 
 
 class ConstrainedBipedVectorEnv(VectorEnv):
@@ -49,8 +49,13 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = MAX_EPISODE_STEPS,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any):
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int | None = MAX_EPISODE_STEPS,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
+    ):
         """Create the batch; the single env validates the arguments."""
         if kwargs.get("render_mode") is not None:
             raise ValueError("the batched vector env does not render; use gym.make for that")
@@ -143,9 +148,14 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         terminated = (status == STATUS_TERMINATED) | (status == STATUS_NONFINITE) | fell
         self._fell = fell
         parts = reward_terms(
-            self._hip[:, 0] - hip0, self.dt,
+            self._hip[:, 0] - hip0,
+            self.dt,
             cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2]) - pos0,
-            self._sim.ist[:, 2] - steps0, ~terminated, tau, p.torque_limit_nm, *p.weights,
+            self._sim.ist[:, 2] - steps0,
+            ~terminated,
+            tau,
+            p.torque_limit_nm,
+            *p.weights,
         )
         for part in parts:
             part[resetting] = 0.0
@@ -167,8 +177,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self._observe()
             mask = np.zeros(self.num_envs, bool)
             mask[done] = True
-            infos.update(final_obs=final_obs, _final_obs=mask, final_info=final_info,
-                         _final_info=mask)
+            infos.update(
+                final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask
+            )
         else:
             self._autoreset = terminated | truncated
         return self._obs.copy(), rewards, terminated, truncated, infos

@@ -10,9 +10,9 @@ from gymnasium.utils.env_checker import check_env
 
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.env import ConstrainedBipedEnv
+from biped_constraint_env.modes import Mode
 from biped_constraint_env.observation import OBS_NAMES
 from biped_constraint_env.rewards import REWARD_TERMS
-from biped_constraint_env.modes import Mode
 
 ENV_ID = "ConstrainedBiped-v0"
 V1 = {"task": "paper", "preset": "default"}  # the paper's task (rest, 20 ms), accurate physics
@@ -244,8 +244,13 @@ def test_fall_termination_optional():
 
 
 def test_midstride_start():
-    """The walking task starts in model 2 from the documented ranges, moving forward; bad ``start`` raises."""
-    from biped_constraint_env.starts import MIDSTRIDE_RATE_RANGE_RAD_S, MIDSTRIDE_THETA0_RANGE_RAD, check_start_state, midstride_start
+    """The walking task starts in model 2 in the documented ranges; a bad ``start`` raises."""
+    from biped_constraint_env.starts import (
+        MIDSTRIDE_RATE_RANGE_RAD_S,
+        MIDSTRIDE_THETA0_RANGE_RAD,
+        check_start_state,
+        midstride_start,
+    )
 
     env = gym.make("ConstrainedBiped-v0")
     assert env.spec.max_episode_steps == 6000

@@ -1,1 +1,1 @@
-"""Training and studies on ConstrainedBiped-v0: the Table 2 baseline, the walking controller, PPO."""
+"""Training and studies on ConstrainedBiped-v0: the Table 2 baseline, the controller, PPO."""

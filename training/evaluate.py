@@ -31,8 +31,10 @@ PUSH_TIME_S = 2.0
 
 
 def load(run: Path, which: str = "final"):
-    """(model, vecnorm, config) of a run directory; ``which``: "final", "best", "checkpoints",
-    "imitation"."""
+    """(model, vecnorm, config) of a run directory.
+
+    ``which``: "final", "best", "checkpoints" or "imitation" (the warm start before PPO).
+    """
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -51,7 +53,7 @@ def load(run: Path, which: str = "final"):
 
 
 def policy_actor(model, vecnorm, cfg) -> Callable[[np.ndarray], np.ndarray]:
-    """obs (24,) -> torques (5,) [N m] of the deterministic policy (through its ActionMap)."""
+    """Obs (24,) -> torques (5,) [N m] of the deterministic policy (through its ActionMap)."""
     amap = cfg.action_map()
 
     def act(obs: np.ndarray) -> np.ndarray:
@@ -184,14 +186,24 @@ def open_loop_baselines() -> list[dict]:
     rows = []
     for label, kw in (
         ("Table 2 open loop, task='paper'", {}),
-        ("Table 2 open loop, default preset, 2 ms", {"preset": "default", "dt": 0.002,
-                                                     "max_periods": 5000}),
+        (
+            "Table 2 open loop, default preset, 2 ms",
+            {"preset": "default", "dt": 0.002, "max_periods": 5000},
+        ),
     ):
         out = run(OpenLoopConfig(gif=False, progress=False, **kw), record_frames=False)
-        eps = [{"seed": 0, "steps_completed": out["steps_completed"],
-                "distance_m": out["distance_m"], "speed_m_s": float("nan"),
-                "torque_cost": float("nan"), "return": float("nan"), "t_s": out["t_end_s"],
-                "end": out["end_reason"]}]
+        eps = [
+            {
+                "seed": 0,
+                "steps_completed": out["steps_completed"],
+                "distance_m": out["distance_m"],
+                "speed_m_s": float("nan"),
+                "torque_cost": float("nan"),
+                "return": float("nan"),
+                "t_s": out["t_end_s"],
+                "end": out["end_reason"],
+            }
+        ]
         rows.append(summarize(label, eps))
     return rows
 
@@ -203,7 +215,7 @@ def figures(actor, cfg, seed_best: int, seed_worst: int, eps_by_seed: dict, out_
     for name, seed in (("best", seed_best), ("worst", seed_worst)):
         frames, images = [], []
 
-        def record(env, _k, frames=frames, images=images):
+        def record(env, _k, frames=frames, images=images, name=name):
             u = env.unwrapped
             # one frame per 20 ms of simulated time (real-time GIF at 50 fps, whatever dt)
             if frames and u.state.t < frames[-1]["t"] + 0.02 - 1e-9:
@@ -231,8 +243,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
-    ap.add_argument("--which", default="final", choices=["final", "best", "checkpoints",
-                                                          "imitation"])
+    ap.add_argument(
+        "--which", default="final", choices=["final", "best", "checkpoints", "imitation"]
+    )
     ap.add_argument("--compare", action="store_true", help="also run the baselines and stresses")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: RUN_DIR)")
     args = ap.parse_args(argv)
@@ -240,8 +253,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error("--episodes must be >= 1")
     if not (args.run_dir / "config.toml").is_file():
         ap.error(f"{args.run_dir} is not a run directory (no config.toml)")
-    print("loading (the first run on a machine compiles the simulator: about a minute, once)",
-          flush=True)
+    print(
+        "loading (the first run on a machine compiles the simulator: about a minute, once)",
+        flush=True,
+    )
     t0 = time.time()
     import torch
 
@@ -252,31 +267,56 @@ def main(argv: Sequence[str] | None = None) -> int:
     seeds = list(range(args.seed, args.seed + args.episodes))
     actor = policy_actor(model, vecnorm, cfg)
     label = "policy" + ("" if cfg.base_controller == "" else " (residual on the model controller)")
-    main_row = summarize(label, run_episodes(actor, cfg.env_kwargs(), seeds, cfg.env_id,
-                                             desc="policy episodes"))
+    main_row = summarize(
+        label, run_episodes(actor, cfg.env_kwargs(), seeds, cfg.env_id, desc="policy episodes")
+    )
     rows = [main_row]
     if args.compare:
         kw = cfg.env_kwargs()
-        rows.append(summarize("policy, 3x reset noise", run_episodes(
-            actor, {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]}, seeds, cfg.env_id,
-            desc="3x noise")))
-        rows.append(summarize(f"policy, push {PUSH_HIP_DV_M_S} m/s at {PUSH_TIME_S} s",
-                              run_episodes(actor, kw, seeds, cfg.env_id, push_at_s=PUSH_TIME_S,
-                                           desc="push")))
+        rows.append(
+            summarize(
+                "policy, 3x reset noise",
+                run_episodes(
+                    actor,
+                    {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]},
+                    seeds,
+                    cfg.env_id,
+                    desc="3x noise",
+                ),
+            )
+        )
+        rows.append(
+            summarize(
+                f"policy, push {PUSH_HIP_DV_M_S} m/s at {PUSH_TIME_S} s",
+                run_episodes(actor, kw, seeds, cfg.env_id, push_at_s=PUSH_TIME_S, desc="push"),
+            )
+        )
         if (args.run_dir / "imitation" / "model.zip").is_file():
             im = policy_actor(*load(args.run_dir, "imitation"))
-            rows.append(summarize("imitation alone (DART + DAgger, before PPO)", run_episodes(
-                im, kw, seeds, cfg.env_id, desc="imitation alone")))
-        import gymnasium as gym
+            rows.append(
+                summarize(
+                    "imitation alone (DART + DAgger, before PPO)",
+                    run_episodes(im, kw, seeds, cfg.env_id, desc="imitation alone"),
+                )
+            )
+        from training.sb3_vec import action_map_from
 
-        from training.model_controller import ModelController
-
-        u = gym.make(cfg.env_id, **kw).unwrapped
-        teacher = ModelController(params=u.params, options=u.options)
-        rows.append(summarize("model controller (the teacher) alone", run_episodes(
-            teacher, kw, seeds, cfg.env_id, desc="model controller")))
-        rows.append(summarize(f"model controller, push {PUSH_HIP_DV_M_S} m/s", run_episodes(
-            teacher, kw, seeds, cfg.env_id, push_at_s=PUSH_TIME_S, desc="controller, push")))
+        spec = cfg.teacher or "model"
+        teacher = action_map_from(spec, 150.0).base
+        rows.append(
+            summarize(
+                f"model controller ({spec!r}, the teacher) alone",
+                run_episodes(teacher, kw, seeds, cfg.env_id, desc="model controller"),
+            )
+        )
+        rows.append(
+            summarize(
+                f"model controller, push {PUSH_HIP_DV_M_S} m/s",
+                run_episodes(
+                    teacher, kw, seeds, cfg.env_id, push_at_s=PUSH_TIME_S, desc="controller, push"
+                ),
+            )
+        )
         rows += open_loop_baselines()
     steps = np.array([e["steps_completed"] for e in main_row["episodes"]], dtype=float)
     dist = np.array([e["distance_m"] for e in main_row["episodes"]])
@@ -286,15 +326,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     figures(actor, cfg, seeds[order[-1]], seeds[order[0]], by_seed, out_dir)
     summary = {"which": args.which, "seeds": seeds, "results": rows}
     (out_dir / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
-    print(f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "
-          f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, strict physics:")
-    print("| controller | complete steps (mean ± std, min) | distance [m] | speed [m/s] | "
-          "torque cost [N² m s per m] | ends |")
+    print(
+        f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "
+        f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, strict physics:"
+    )
+    print(
+        "| controller | complete steps (mean ± std, min) | distance [m] | speed [m/s] | "
+        "torque cost [N² m s per m] | ends |"
+    )
     print("|---|---|---|---|---|---|")
     for r in rows:
         print(table_row(r))
-    print(f"\nfigures: {out_dir / 'figures'} (best.gif, best_strip.png, worst_strip.png); "
-          f"summary: {out_dir / 'evaluation.json'}; {time.time() - t0:.0f} s")
+    print(
+        f"\nfigures: {out_dir / 'figures'} (best.gif, best_strip.png, worst_strip.png); "
+        f"summary: {out_dir / 'evaluation.json'}; {time.time() - t0:.0f} s"
+    )
     return 0
 
 

@@ -155,8 +155,55 @@ def fit(
     return loss_mean
 
 
+class Anchor:
+    """A few behaviour-cloning steps at a time on fixed data, with one persistent optimiser.
+
+    Interleaved with PPO's updates (kickstarting / the iterative supervised + policy-gradient
+    design), it keeps the policy near the teacher where the demonstrations are, while PPO
+    moves it where its return improves.
+    """
+
+    def __init__(
+        self,
+        policy,
+        data: Dataset,
+        lr: float,
+        batch_size: int = 512,
+        weights: np.ndarray | None = None,
+        seed: int = 0,
+    ):
+        """Anchor ``policy``'s actor to ``data`` (see :func:`fit` for ``weights``)."""
+        self.policy = policy
+        self.x = torch.as_tensor(data.obs, dtype=torch.float32)
+        self.y = torch.as_tensor(data.act, dtype=torch.float32)
+        w = torch.ones(5) if weights is None else torch.as_tensor(weights, dtype=torch.float32)
+        self.w = w / w.mean()
+        self.batch_size = batch_size
+        self.gen = torch.Generator().manual_seed(seed)
+        self.params = [
+            *policy.features_extractor.parameters(),
+            *policy.mlp_extractor.policy_net.parameters(),
+            *policy.action_net.parameters(),
+        ]
+        self.opt = torch.optim.Adam(self.params, lr=lr)
+
+    def steps(self, n: int) -> float:
+        """``n`` gradient steps; returns their mean weighted squared error."""
+        p = self.policy
+        total = 0.0
+        for _ in range(n):
+            idx = torch.randint(len(self.x), (self.batch_size,), generator=self.gen)
+            latent = p.mlp_extractor.forward_actor(p.extract_features(self.x[idx]))
+            loss = torch.mean(self.w * (p.action_net(latent) - self.y[idx]) ** 2)
+            self.opt.zero_grad()
+            loss.backward()
+            self.opt.step()
+            total += loss.item()
+        return total / max(n, 1)
+
+
 def student_fn(policy):
-    """obs (24,) -> the policy's deterministic normalised action (5,), as a numpy function."""
+    """Obs (24,) -> the policy's deterministic normalised action (5,), as a numpy function."""
 
     def act(obs: np.ndarray) -> np.ndarray:
         with torch.no_grad():
@@ -166,7 +213,6 @@ def student_fn(policy):
             ).numpy()[0]
 
     return act
-
 
 
 class FixedNormalizer(BaseFeaturesExtractor):

@@ -40,11 +40,10 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from biped_constraint_env.observation import OBS_NAMES
-from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start
 from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode
+from biped_constraint_env.observation import OBS_NAMES
 from biped_constraint_env.simulator import (
     DEFAULT_OPTIONS,
     SimOptions,
@@ -52,6 +51,7 @@ from biped_constraint_env.simulator import (
     evaluate,
     keypoints,
 )
+from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start
 
 _I = {n: i for i, n in enumerate(OBS_NAMES)}
 # outputs y = C q + c over (theta0, q1..q5): stance ankle, stance knee, swing thigh from the

@@ -32,8 +32,8 @@ import numpy as np
 
 from biped_constraint_env import paper_biped
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start, start_slots
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimArrays, advance
+from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start, start_slots
 from training.common import make_run_dir, parse_config, progress
 
 

@@ -8,10 +8,9 @@ object in the single and the batched env.
 
 from __future__ import annotations
 
-from typing import Any
-
 import json
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -62,7 +61,9 @@ def action_map_from(base_controller: str, gear, limit: float = TORQUE_LIMIT_NM) 
         path = base_controller.partition(":")[2]
         gains = json.loads(Path(path).read_text()) if path else None
         return ActionMap(gear, ModelController(gains, limit=limit), limit)
-    raise ValueError(f"base_controller must be '', 'model' or 'model:GAINS.json', got {base_controller!r}")
+    raise ValueError(
+        f"base_controller must be '', 'model' or 'model:GAINS.json', got {base_controller!r}"
+    )
 
 
 def make_sb3_vec_env(

@@ -32,7 +32,6 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env import paper_biped
-from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
 from biped_constraint_env.kinematics import link_angles
 from biped_constraint_env.modes import EventCode
 from biped_constraint_env.simulator import (
@@ -43,6 +42,7 @@ from biped_constraint_env.simulator import (
     advance,
     keypoints,
 )
+from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
 from training.common import make_run_dir, parse_config, progress
 from training.open_loop import TABLES
 

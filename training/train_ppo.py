@@ -77,6 +77,9 @@ class PPOConfig:
     action_std_nm: float = 0.0  # > 0: initial action std [N m] on every joint (overrides
     # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
     critic_warmup: int = 0  # rollouts at the start of PPO in which only the critic learns
+    bc_anchor_steps: int = 0  # behaviour-cloning steps on the imitation data after each PPO
+    # update (kickstarting; 0 = off)
+    bc_anchor_lr: float = 1e-4
     out_dir: Path = Path("runs")
     resume: str = ""  # a run directory to continue
     progress: bool = True
@@ -153,6 +156,11 @@ demonstrations from ``DEMO_SEED_OFFSET + ...``, the imitation and periodic evalu
 DEMO_SEED_OFFSET = 2_000_000
 
 
+def bc_weights(cfg: PPOConfig) -> np.ndarray:
+    """Per-joint weights of the cloning error: the stance ankle's, the swing ankle's half."""
+    return np.array([cfg.bc_ankle_weight, 1, 1, 1, max(1.0, cfg.bc_ankle_weight / 2)])
+
+
 def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     """DART demonstrations and DAgger rounds of the teacher, cloned into a new PPO model.
 
@@ -168,14 +176,19 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     env = gym.make(cfg.env_id, **cfg.env_kwargs()).unwrapped
     teacher = action_map_from(cfg.teacher, TORQUE_LIMIT_NM).base
     gear = cfg.action_map().gear
-    weights = np.array([cfg.bc_ankle_weight, 1, 1, 1, max(1.0, cfg.bc_ankle_weight / 2)])
+    weights = bc_weights(cfg)
     rng = np.random.default_rng(cfg.seed)
     seed = DEMO_SEED_OFFSET + 100_000 * cfg.seed
     t0 = time.time()
     print(f"imitation: {cfg.bc_episodes0} noisy teacher episodes (DART)", flush=True)
     demo = imitation.collect(
-        env, teacher, gear, list(range(seed, seed + cfg.bc_episodes0)), cfg.bc_periods0,
-        cfg.bc_noise_nm, rng=rng,
+        env,
+        teacher,
+        gear,
+        list(range(seed, seed + cfg.bc_episodes0)),
+        cfg.bc_periods0,
+        cfg.bc_noise_nm,
+        rng=rng,
     )
     seed += cfg.bc_episodes0
     data = demo.data
@@ -189,17 +202,34 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
             model.policy, data, epochs, lr=cfg.bc_lr, seed=cfg.seed + k, weights=weights
         )
         student = imitation.student_fn(model.policy)
-        check = imitation.collect(env, teacher, gear, list(range(20_000, 20_005)), 6000,
-                                  student=student)
-        rows.append({"round": k, "samples": len(data), "mse": mse,
-                     "student_steps": json.dumps(check.steps), "wall_s": round(time.time() - t0)})
-        print(f"imitation round {k}: {len(data)} samples, mse {mse:.2e}, student steps "
-              f"{check.steps} ({time.time() - t0:.0f} s)", flush=True)
+        check = imitation.collect(
+            env, teacher, gear, list(range(20_000, 20_005)), 6000, student=student
+        )
+        rows.append(
+            {
+                "round": k,
+                "samples": len(data),
+                "mse": mse,
+                "student_steps": json.dumps(check.steps),
+                "wall_s": round(time.time() - t0),
+            }
+        )
+        print(
+            f"imitation round {k}: {len(data)} samples, mse {mse:.2e}, student steps "
+            f"{check.steps} ({time.time() - t0:.0f} s)",
+            flush=True,
+        )
         if k == cfg.bc_rounds:
             break
         more = imitation.collect(
-            env, teacher, gear, list(range(seed, seed + cfg.bc_episodes)), cfg.bc_periods,
-            cfg.bc_noise_nm, student=student, rng=rng,
+            env,
+            teacher,
+            gear,
+            list(range(seed, seed + cfg.bc_episodes)),
+            cfg.bc_periods,
+            cfg.bc_noise_nm,
+            student=student,
+            rng=rng,
         )
         seed += cfg.bc_episodes
         data = data + more.data
@@ -207,11 +237,15 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    return model
+    return model, data
 
 
-def _critic_warmup(cfg: PPOConfig):
-    """A callback that freezes the actor for the first ``cfg.critic_warmup`` rollouts."""
+def _critic_warmup(cfg: PPOConfig, anchor=None):
+    """A callback: the actor frozen for the first ``cfg.critic_warmup`` rollouts.
+
+    With ``anchor`` (an :class:`training.imitation.Anchor`) it also takes
+    ``cfg.bc_anchor_steps`` behaviour-cloning steps after every PPO update.
+    """
     from stable_baselines3.common.callbacks import BaseCallback
 
     class CriticWarmup(BaseCallback):
@@ -222,12 +256,23 @@ def _critic_warmup(cfg: PPOConfig):
         def _on_step(self) -> bool:
             return True
 
+        def _on_training_start(self) -> None:
+            if self.model.num_timesteps > 0:  # resumed: the warm-up is over
+                self.rollouts = cfg.critic_warmup
+
+        def _on_rollout_start(self) -> None:  # after the previous rollout's update
+            if anchor is not None and self.rollouts > cfg.critic_warmup:
+                self.logger.record("train/bc_anchor_mse", anchor.steps(cfg.bc_anchor_steps))
+
         def _on_rollout_end(self) -> None:
             self.rollouts += 1
             p = self.model.policy
             frozen = self.rollouts <= cfg.critic_warmup
-            for param in [*p.mlp_extractor.policy_net.parameters(), *p.action_net.parameters(),
-                          p.log_std]:
+            for param in [
+                *p.mlp_extractor.policy_net.parameters(),
+                *p.action_net.parameters(),
+                p.log_std,
+            ]:
                 param.requires_grad_(not frozen)
 
     return CriticWarmup()
@@ -258,6 +303,8 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
         def _on_training_start(self) -> None:
             # on resume, count from the restored step count, not from zero
             n = self.model.num_timesteps
+            if n == 0 and cfg.teacher:  # the imitation result competes for best/ too
+                self._evaluate(0)
             self.next_eval = (n // cfg.eval_freq + 1) * cfg.eval_freq
             self.next_ckpt = (n // cfg.checkpoint_freq + 1) * cfg.checkpoint_freq
 
@@ -345,7 +392,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
     venv = make_sb3_vec_env(
-        cfg.n_envs, TRAIN_SEED_OFFSET + cfg.seed, cfg.env_kwargs(), cfg.vec, cfg.env_id,
+        cfg.n_envs,
+        TRAIN_SEED_OFFSET + cfg.seed,
+        cfg.env_kwargs(),
+        cfg.vec,
+        cfg.env_id,
         cfg.action_map(),
     )
     start = 0
@@ -356,15 +407,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     venv = VecMonitor(
         venv, str(monitor), info_keywords=("steps_completed", "hip_y", "termination_reason")
     )
+    demos = None
     if cfg.resume:
         vecnorm = VecNormalize.load(str(run / "checkpoints" / "vecnormalize.pkl"), venv)
         model = PPO.load(run / "checkpoints" / "model.zip", env=vecnorm, device="cpu")
         print(f"resuming at {model.num_timesteps} env steps", flush=True)
     else:
         # with a teacher the policy normalises observations itself (fixed statistics)
-        vecnorm = VecNormalize(
-            venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma
-        )
+        vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
 
         def make_model(mean=None, var=None):
             policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init}
@@ -393,17 +443,32 @@ def main(argv: Sequence[str] | None = None) -> int:
                 verbose=0,
             )
 
-        model = imitation_warm_start(cfg, run, make_model) if cfg.teacher else make_model()
+        if cfg.teacher:
+            model, demos = imitation_warm_start(cfg, run, make_model)
+        else:
+            model = make_model()
         if cfg.action_std_nm > 0:
             gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
             model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
         if cfg.teacher:  # the imitation result alone, for comparison
             save(model, vecnorm, run / "imitation")
+    anchor = None
+    if cfg.teacher and cfg.bc_anchor_steps > 0:
+        from training.imitation import Anchor, Dataset
+
+        path = run / "imitation" / "demos.npz"
+        if demos is not None:
+            np.savez_compressed(path, obs=demos.obs, act=demos.act)
+        with np.load(path) as z:
+            demos = Dataset(z["obs"], z["act"])
+        anchor = Anchor(
+            model.policy, demos, cfg.bc_anchor_lr, weights=bc_weights(cfg), seed=cfg.seed
+        )
     remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
     t0 = time.time()
     model.learn(
         total_timesteps=remaining,
-        callback=[_callbacks(cfg, run, vecnorm), _critic_warmup(cfg)],
+        callback=[_callbacks(cfg, run, vecnorm), _critic_warmup(cfg, anchor)],
         progress_bar=cfg.progress,
         reset_num_timesteps=not cfg.resume,
     )
