@@ -126,7 +126,7 @@ def test_train_ppo_with_teacher_smoke(tmp_path):
         + ["--bc-episodes", "1", "--bc-periods", "30", "--bc-grad-steps", "20"]
         + ["--total-timesteps", "256", "--n-envs", "2", "--n-steps", "64", "--batch-size", "64"]
         + ["--eval-freq", "1000", "--checkpoint-freq", "1000", "--action-std-nm", "0.3"]
-        + ["--critic-warmup", "1", "--progress", "false"]
+        + ["--critic-warmup", "1", "--bc-anchor-steps", "2", "--progress", "false"]
     )
     assert rc == 0
     (run,) = (tmp_path / "train_ppo").iterdir()
@@ -137,3 +137,7 @@ def test_train_ppo_with_teacher_smoke(tmp_path):
     assert isinstance(model.policy.features_extractor, imitation.FixedNormalizer)
     std = model.policy.log_std.exp().detach().numpy() * GEAR
     assert std == pytest.approx(np.full(5, 0.3), rel=0.2)  # action_std_nm, per joint in N m
+    assert (run / "imitation" / "demos.npz").is_file()  # the anchor's data, for a resume
+    rc = train_ppo.main(["--resume", str(run), "--total-timesteps", "384", "--progress", "false"])
+    assert rc == 0
+    assert PPO.load(run / "model.zip", device="cpu").num_timesteps >= 384

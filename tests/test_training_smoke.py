@@ -163,7 +163,9 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
     assert PPO.load(run / "model.zip", device="cpu").num_timesteps >= 768
     assert evaluate.main([str(run), "--episodes", "2"]) == 0
     summary = json.loads((run / "evaluation.json").read_text())
-    assert len(summary["episodes"]) == 2 and (run / "figures" / "best.gif").is_file()
+    (policy,) = summary["results"]
+    assert summary["seeds"] == [0, 1] and len(policy["episodes"]) == 2
+    assert (run / "figures" / "best.gif").is_file()
 
 
 def test_table2_study_smoke(tmp_path):

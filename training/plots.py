@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -92,10 +93,15 @@ def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
 
 
 def learning_curve(run: Path, path: Path) -> None:
-    """Completed walking steps and return against env steps, from monitor.csv and eval.csv."""
+    """Completed walking steps and return against env steps, from monitor.csv and eval.csv.
+
+    With an imitation warm start (``imitation.csv``), a first panel shows the student's steps
+    after each DAgger round against the demonstration samples collected so far.
+    """
     import csv
 
     plt = _mpl()
+    imitation = run / "imitation.csv"
     files = sorted(
         run.glob("monitor*.csv"),
         key=lambda f: 0 if f.name == "monitor.csv" else int(f.name.split(".")[1]),
@@ -110,7 +116,20 @@ def learning_curve(run: Path, path: Path) -> None:
     x = np.array(x)
     rets = np.array([float(r[0]) for r in mon])
     steps = np.array([int(r[3]) for r in mon])
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    fig, axes = plt.subplots(1, 3 if imitation.exists() else 2, figsize=(16, 3.8))
+    if imitation.exists():
+        with open(imitation) as fh:
+            im = list(csv.DictReader(fh))
+        n = [int(r["samples"]) for r in im]
+        st = [json.loads(r["student_steps"]) for r in im]
+        axes[0].plot(n, [np.mean(v) for v in st], "o-", label="student, mean of 5 episodes")
+        axes[0].plot(n, [np.min(v) for v in st], "x--", label="student, min")
+        axes[0].set_xlabel("labelled samples (DART, then DAgger rounds)")
+        axes[0].set_ylabel("completed walking steps")
+        axes[0].set_title("imitation of the teacher", fontsize=9)
+        axes[0].legend(fontsize=8)
+        axes[0].grid(lw=0.3)
+        axes = axes[1:]
     window = max(len(mon) // 200, 1)
 
     def smooth(y):
@@ -127,8 +146,9 @@ def learning_curve(run: Path, path: Path) -> None:
         axes[1].plot(ex, [float(r["return_mean"]) for r in ev], "o-", label=lab)
     axes[0].set_ylabel("completed walking steps per episode")
     axes[1].set_ylabel("return")
+    axes[0].set_title("PPO from the imitation result" if imitation.exists() else "PPO", fontsize=9)
     for ax in axes:
-        ax.set_xlabel("env steps")
+        ax.set_xlabel("env steps (PPO)")
         ax.legend(fontsize=8)
         ax.grid(lw=0.3)
     fig.tight_layout()

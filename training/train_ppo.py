@@ -233,6 +233,8 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
         )
         seed += cfg.bc_episodes
         data = data + more.data
+    with open(run / "training_time.txt", "a") as fh:
+        fh.write(f"imitation: {len(data)} labelled env steps, {time.time() - t0:.0f} s wall\n")
     with open(run / "imitation.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
@@ -476,7 +478,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     model.save(run / "model.zip")
     vecnorm.save(str(run / "vecnormalize.pkl"))
     with open(run / "training_time.txt", "a") as fh:
-        fh.write(f"{model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
+        fh.write(f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
     from training.plots import learning_curve
 
     learning_curve(run, run / "figures" / "learning_curve.png")
