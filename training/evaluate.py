@@ -299,10 +299,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                     run_episodes(im, kw, seeds, cfg.env_id, desc="imitation alone"),
                 )
             )
-        from training.sb3_vec import action_map_from
+        from training.model_controller import controller_from
 
         spec = cfg.teacher or "model"
-        teacher = action_map_from(spec, 150.0).base
+        teacher = controller_from(spec)
         rows.append(
             summarize(
                 f"model controller ({spec!r}, the teacher) alone",

@@ -103,6 +103,31 @@ def obs_statistics(obs: np.ndarray, floor: float = 1e-2) -> tuple[np.ndarray, np
     return mean, var
 
 
+def _actor_params(policy) -> list:
+    """The parameters behind the policy's mean action (extractor, policy MLP, action head)."""
+    return [
+        *policy.features_extractor.parameters(),
+        *policy.mlp_extractor.policy_net.parameters(),
+        *policy.action_net.parameters(),
+    ]
+
+
+def _joint_weights(weights: np.ndarray | None):
+    """Per-joint weights of the squared error, normalised to mean 1 (default: equal)."""
+    w = torch.ones(5) if weights is None else torch.as_tensor(weights, dtype=torch.float32)
+    return w / w.mean()
+
+
+def _mean_action(policy, x):
+    """The policy's mean action (before clipping) for a batch of raw observations."""
+    return policy.action_net(policy.mlp_extractor.forward_actor(policy.extract_features(x)))
+
+
+def _loss(policy, x, y, w):
+    """Weighted mean-squared error of the policy's mean action against the labels."""
+    return torch.mean(w * (_mean_action(policy, x) - y) ** 2)
+
+
 def fit(
     policy,
     data: Dataset,
@@ -123,14 +148,8 @@ def fit(
     gen = torch.Generator().manual_seed(seed)
     x = torch.as_tensor(data.obs, dtype=torch.float32)
     y = torch.as_tensor(data.act, dtype=torch.float32)
-    w = torch.ones(5) if weights is None else torch.as_tensor(weights, dtype=torch.float32)
-    w = w / w.mean()
-    params = [
-        *policy.features_extractor.parameters(),
-        *policy.mlp_extractor.policy_net.parameters(),
-        *policy.action_net.parameters(),
-    ]
-    opt = torch.optim.Adam(params, lr=lr)
+    w = _joint_weights(weights)
+    opt = torch.optim.Adam(_actor_params(policy), lr=lr)
     n_batches = max(len(x) // batch_size, 1)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=epochs * n_batches)
     loss_mean = float("nan")
@@ -140,9 +159,7 @@ def fit(
         total = 0.0
         for b in range(n_batches):
             idx = perm[b * batch_size : (b + 1) * batch_size]
-            features = policy.extract_features(x[idx])
-            latent_pi = policy.mlp_extractor.forward_actor(features)
-            loss = torch.mean(w * (policy.action_net(latent_pi) - y[idx]) ** 2)
+            loss = _loss(policy, x[idx], y[idx], w)
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -176,25 +193,17 @@ class Anchor:
         self.policy = policy
         self.x = torch.as_tensor(data.obs, dtype=torch.float32)
         self.y = torch.as_tensor(data.act, dtype=torch.float32)
-        w = torch.ones(5) if weights is None else torch.as_tensor(weights, dtype=torch.float32)
-        self.w = w / w.mean()
+        self.w = _joint_weights(weights)
         self.batch_size = batch_size
         self.gen = torch.Generator().manual_seed(seed)
-        self.params = [
-            *policy.features_extractor.parameters(),
-            *policy.mlp_extractor.policy_net.parameters(),
-            *policy.action_net.parameters(),
-        ]
-        self.opt = torch.optim.Adam(self.params, lr=lr)
+        self.opt = torch.optim.Adam(_actor_params(policy), lr=lr)
 
     def steps(self, n: int) -> float:
         """``n`` gradient steps; returns their mean weighted squared error."""
-        p = self.policy
         total = 0.0
         for _ in range(n):
             idx = torch.randint(len(self.x), (self.batch_size,), generator=self.gen)
-            latent = p.mlp_extractor.forward_actor(p.extract_features(self.x[idx]))
-            loss = torch.mean(self.w * (p.action_net(latent) - self.y[idx]) ** 2)
+            loss = _loss(self.policy, self.x[idx], self.y[idx], self.w)
             self.opt.zero_grad()
             loss.backward()
             self.opt.step()
@@ -208,9 +217,7 @@ def student_fn(policy):
     def act(obs: np.ndarray) -> np.ndarray:
         with torch.no_grad():
             x = torch.as_tensor(obs[None, :], dtype=torch.float32)
-            return policy.action_net(
-                policy.mlp_extractor.forward_actor(policy.extract_features(x))
-            ).numpy()[0]
+            return _mean_action(policy, x).numpy()[0]
 
     return act
 

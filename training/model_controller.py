@@ -300,6 +300,18 @@ class ModelController:
         return tau
 
 
+def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelController:
+    """The controller of a config string.
+
+    ``"model"``: DEFAULT_GAINS; ``"model:GAINS.json"``: those gains overriding the defaults.
+    """
+    if spec != "model" and not spec.startswith("model:"):
+        raise ValueError(f"a controller is 'model' or 'model:GAINS.json', got {spec!r}")
+    path = spec.partition(":")[2]
+    gains = json.loads(Path(path).read_text()) if path else None
+    return ModelController(gains, limit=limit)
+
+
 def midstride_state(rate: float = -1.0, theta0: float = -0.2, lean: float = 0.1) -> SimState:
     """The model-2 state of :func:`biped_constraint_env.env.midstride_start` (v2's start)."""
     q, qd = midstride_start(rate, theta0, lean)

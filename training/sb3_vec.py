@@ -8,8 +8,6 @@ object in the single and the batched env.
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -55,15 +53,9 @@ def action_map_from(base_controller: str, gear, limit: float = TORQUE_LIMIT_NM) 
     """
     if not base_controller:
         return ActionMap(gear, None, limit)
-    if base_controller == "model" or base_controller.startswith("model:"):
-        from training.model_controller import ModelController
+    from training.model_controller import controller_from
 
-        path = base_controller.partition(":")[2]
-        gains = json.loads(Path(path).read_text()) if path else None
-        return ActionMap(gear, ModelController(gains, limit=limit), limit)
-    raise ValueError(
-        f"base_controller must be '', 'model' or 'model:GAINS.json', got {base_controller!r}"
-    )
+    return ActionMap(gear, controller_from(base_controller, limit), limit)
 
 
 def make_sb3_vec_env(

@@ -106,49 +106,6 @@ class PPOConfig:
         return action_map_from(self.base_controller, gear)
 
 
-def evaluate_policy_episodes(
-    model, vecnorm, cfg: PPOConfig, n: int, seed0: int, deterministic: bool = True, record=None
-) -> list[dict]:
-    """Run ``n`` seeded episodes of the single env; per episode: steps, distance, reason, return.
-
-    ``model=None`` runs the base controller alone (zero residual). ``record(env,
-    episode_index)`` is called before every step if given (frames for figures).
-    """
-    import gymnasium as gym
-
-    import biped_constraint_env  # noqa: F401
-
-    env = gym.make(cfg.env_id, **cfg.env_kwargs(), render_mode="rgb_array" if record else None)
-    amap = cfg.action_map()
-    out = []
-    for ep in range(n):
-        obs, info = env.reset(seed=seed0 + ep)
-        y0, ret, done = info["hip_y"], 0.0, False
-        while not done:
-            if record:
-                record(env, ep)
-            o = vecnorm.normalize_obs(obs[None, :].astype(np.float32)) if vecnorm else obs[None, :]
-            if model is None:
-                action = np.zeros((1, 5))
-            else:
-                action, _ = model.predict(o, deterministic=deterministic)
-            obs, r, term, trunc, info = env.step(amap(action, obs[None, :])[0])
-            ret += r
-            done = term or trunc
-        out.append(
-            {
-                "seed": seed0 + ep,
-                "steps_completed": info["steps_completed"],
-                "distance_m": info["hip_y"] - y0,
-                "return": ret,
-                "t_s": info["t"],
-                "end": info["termination_reason"] or "time_limit",
-            }
-        )
-    env.close()
-    return out
-
-
 TRAIN_SEED_OFFSET = 1_000_000
 """Training episodes draw their starts from seeds ``TRAIN_SEED_OFFSET + seed + i``,
 demonstrations from ``DEMO_SEED_OFFSET + ...``, the imitation and periodic evaluations from
@@ -171,10 +128,11 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     import gymnasium as gym
 
     from training import imitation
-    from training.sb3_vec import action_map_from
+    from training.evaluate import run_episodes
+    from training.model_controller import controller_from
 
     env = gym.make(cfg.env_id, **cfg.env_kwargs()).unwrapped
-    teacher = action_map_from(cfg.teacher, TORQUE_LIMIT_NM).base
+    teacher = controller_from(cfg.teacher, TORQUE_LIMIT_NM)
     gear = cfg.action_map().gear
     weights = bc_weights(cfg)
     rng = np.random.default_rng(cfg.seed)
@@ -202,21 +160,27 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
             model.policy, data, epochs, lr=cfg.bc_lr, seed=cfg.seed + k, weights=weights
         )
         student = imitation.student_fn(model.policy)
-        check = imitation.collect(
-            env, teacher, gear, list(range(20_000, 20_005)), 6000, student=student
-        )
+        check = [
+            e["steps_completed"]
+            for e in run_episodes(
+                lambda o, student=student: np.clip(student(o), -1, 1) * gear,
+                cfg.env_kwargs(),
+                range(20_000, 20_005),
+                cfg.env_id,
+            )
+        ]
         rows.append(
             {
                 "round": k,
                 "samples": len(data),
                 "mse": mse,
-                "student_steps": json.dumps(check.steps),
+                "student_steps": json.dumps(check),
                 "wall_s": round(time.time() - t0),
             }
         )
         print(
             f"imitation round {k}: {len(data)} samples, mse {mse:.2e}, student steps "
-            f"{check.steps} ({time.time() - t0:.0f} s)",
+            f"{check} ({time.time() - t0:.0f} s)",
             flush=True,
         )
         if k == cfg.bc_rounds:
@@ -324,7 +288,12 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
             save(self.model, vecnorm, where)
 
         def _evaluate(self, n):
-            eps = evaluate_policy_episodes(self.model, vecnorm, cfg, cfg.eval_episodes, 10_000)
+            from training.evaluate import policy_actor, run_episodes
+
+            actor = policy_actor(self.model, vecnorm, cfg)
+            eps = run_episodes(
+                actor, cfg.env_kwargs(), range(10_000, 10_000 + cfg.eval_episodes), cfg.env_id
+            )
             steps = np.array([e["steps_completed"] for e in eps])
             dist = np.array([e["distance_m"] for e in eps])
             ret = np.array([e["return"] for e in eps])
