@@ -67,7 +67,7 @@ FC_TOE, FC_HEEL, FC_CONTACT, FC_STANCE_Y, FC_SLIP = range(5)
 N_FORCES = 5
 
 # Workspace layout (a tuple of arrays).
-W_K, W_KP, W_M, W_TMP, W_F, W_N, W_A, W_R, W_JAC, W_JACP, W_QDD, W_Z6, W_CNT, W_E = range(14)
+W_K, W_KP, W_M, W_TMP, W_F, W_N, W_A, W_R, W_JAC, W_JACP, W_QDD, W_Z6, W_CNT, W_E, W_X = range(15)
 
 INF = math.inf
 
@@ -100,6 +100,7 @@ def nb_make_work():
         np.zeros(6),  # zeros (never written)
         np.zeros(1),  # count of constrained solves (cost accounting)
         np.zeros(6),  # unit vector scratch (mass matrix by Newton-Euler columns)
+        np.empty((6, 3)),  # three right-hand sides (solve with implicit friction)
     )
 
 
@@ -116,6 +117,12 @@ def nb_lu_solve_inplace(m, x, n):
     m is destroyed; x holds the solution. Returns the pivot ratio min|u_ii| / max|u_ii|, a
     cheap conditioning indicator (0: singular).
     """
+    return nb_lu_solve_multi(m, x.reshape((x.shape[0], 1)), n, 1)
+
+
+@njit(cache=True)
+def nb_lu_solve_multi(m, x, n, nr):
+    """:func:`nb_lu_solve_inplace` for the nr right-hand sides in the columns of x[:n, :nr]."""
     umin = INF
     umax = 0.0
     for k in range(n):
@@ -130,9 +137,10 @@ def nb_lu_solve_inplace(m, x, n):
                 t = m[k, j]
                 m[k, j] = m[p, j]
                 m[p, j] = t
-            t = x[k]
-            x[k] = x[p]
-            x[p] = t
+            for c in range(nr):
+                t = x[k, c]
+                x[k, c] = x[p, c]
+                x[p, c] = t
         piv = m[k, k]
         umin = min(umin, abs(piv))
         umax = max(umax, abs(piv))
@@ -143,12 +151,14 @@ def nb_lu_solve_inplace(m, x, n):
             if f != 0.0:
                 for j in range(k + 1, n):
                     m[i, j] -= f * m[k, j]
-                x[i] -= f * x[k]
-    for k in range(n - 1, -1, -1):
-        s = x[k]
-        for j in range(k + 1, n):
-            s -= m[k, j] * x[j]
-        x[k] = s / m[k, k]
+                for c in range(nr):
+                    x[i, c] -= f * x[k, c]
+    for c in range(nr):
+        for k in range(n - 1, -1, -1):
+            s = x[k, c]
+            for j in range(k + 1, n):
+                s -= m[k, j] * x[j, c]
+            x[k, c] = s / m[k, k]
     return umin / umax if umax > 0.0 else 0.0
 
 
@@ -180,7 +190,9 @@ def nb_mass_matrix_columns_w(ch, q, W):
 
 
 @njit(cache=True)
-def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, mass_rnea=False):
+def nb_solve_mode_w(
+    ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, mass_rnea=False, implicit_friction=False
+):
     """The constrained solve of paper eq. 9 for ``mode`` (1..4); qdd goes to W[W_QDD].
 
     Args:
@@ -189,6 +201,10 @@ def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, ma
         jdot_fd_h: 0 for the exact J-dot q-dot; > 0 for the paper's backward difference.
         slip_eps: friction regularisation speed [m/s].
         W: workspace.
+        mass_rnea: the mass matrix by Newton-Euler columns (paper eq. 14) instead of CRBA.
+        implicit_friction: with h_imp > 0 and a point contact, also take the friction's
+            direction at the step's end, ``s(v + h_imp J_t qdd)`` (see
+            :func:`_solve_implicit_friction`).
 
     Returns:
         f_n [N] (0 without contact), slip sign s, pivot ratio of the factorisation.
@@ -225,6 +241,8 @@ def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, ma
             nb_fk(ch, q - jdot_fd_h * qd, z6, z6, 0.0, W[W_KP])
         gamma, sg = nb_contact_rows(K, W[W_KP], qd, sc[col], slip_eps, jdot_fd_h, jac, W[W_JACP])
         fric = sc[SC_FRICTION] * sg
+        if implicit_friction and h_imp > 0.0:
+            return _solve_implicit_friction(sc, s0, n, qd, h_imp, slip_eps, gamma, sg, W)
         for i in range(n):
             A[i, n] = -(jac[1, s0 + i] - fric * jac[0, s0 + i])
             A[n, i] = jac[1, s0 + i]
@@ -234,6 +252,89 @@ def nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, ma
     for i in range(6):
         qdd[i] = r[i - s0] if i >= s0 else 0.0
     fn = r[n] if nc == 1 else 0.0
+    return fn, sg, piv
+
+
+@njit(cache=True)
+def _slip_residual(w, v, h, s, eps, kf, P, U, Wt, Pc, Uc, Wc):
+    """Residual (scaled by h) of the slip speed w at the step's end, and its f_n and sigma."""
+    sigma = w / math.sqrt(w * w + eps * eps) - s
+    fn = -Pc / (Uc - kf * sigma * Wc)
+    return w - v - h * (P + fn * (U - kf * sigma * Wt)), fn, sigma
+
+
+@njit(cache=True)
+def _solve_implicit_friction(sc, s0, n, qd, h, eps, gamma, sg, W):
+    """The point-contact solve with the friction direction taken at the step's end.
+
+    With A = M + h D (its leading n x n block in W[W_A]), c = J_c - K s J_t and
+    sigma = s(v + h J_t qdd) - s(v) (v the slip speed, s the regularised sign):
+    ``A qdd = r + c f - K f sigma J_t`` and ``J_c qdd = gamma``. With p, u, w = A^-1 (r, c, J_t)
+    (one factorisation, three right-hand sides), f = -(J_c p - gamma) / (J_c u - K sigma J_c w)
+    and the end slip speed solves one scalar equation, bracketed and closed by Illinois regula
+    falsi: the friction force stays bounded by K f_n, however stiff the regularisation.
+    """
+    A = W[W_A]
+    r = W[W_R]
+    jac = W[W_JAC]
+    qdd = W[W_QDD]
+    X = W[W_X]
+    kf = sc[SC_FRICTION]
+    v = 0.0
+    for i in range(6):
+        v += jac[0, i] * qd[i]
+    for i in range(n):
+        X[i, 0] = r[i]
+        X[i, 1] = jac[1, s0 + i] - kf * sg * jac[0, s0 + i]
+        X[i, 2] = jac[0, s0 + i]
+    piv = nb_lu_solve_multi(A, X, n, 3)
+    P = U = Wt = Pc = Uc = Wc = 0.0
+    for i in range(n):
+        P += jac[0, s0 + i] * X[i, 0]
+        U += jac[0, s0 + i] * X[i, 1]
+        Wt += jac[0, s0 + i] * X[i, 2]
+        Pc += jac[1, s0 + i] * X[i, 0]
+        Uc += jac[1, s0 + i] * X[i, 1]
+        Wc += jac[1, s0 + i] * X[i, 2]
+    Pc -= gamma
+    # bracket the end slip speed, starting from the explicit prediction
+    lo = v + h * (P - Pc / Uc * U)
+    rlo, fn, sigma = _slip_residual(lo, v, h, sg, eps, kf, P, U, Wt, Pc, Uc, Wc)
+    step = max(eps, abs(lo - v))
+    direction = -1.0 if rlo > 0.0 else 1.0
+    hi = lo
+    rhi = rlo
+    for _ in range(80):
+        hi = lo + direction * step
+        rhi, fn, sigma = _slip_residual(hi, v, h, sg, eps, kf, P, U, Wt, Pc, Uc, Wc)
+        if (rhi > 0.0) != (rlo > 0.0) or rhi == 0.0:
+            break
+        lo = hi
+        rlo = rhi
+        step *= 2.0
+    side = 0
+    for _ in range(100):
+        if rhi == 0.0 or abs(hi - lo) <= 1e-12 * max(eps, abs(hi)):
+            break
+        w = (lo * rhi - hi * rlo) / (rhi - rlo)
+        rw, fn, sigma = _slip_residual(w, v, h, sg, eps, kf, P, U, Wt, Pc, Uc, Wc)
+        if (rw > 0.0) == (rhi > 0.0):
+            hi = w
+            rhi = rw
+            if side == 1:
+                rlo *= 0.5
+            side = 1
+        else:
+            lo = w
+            rlo = rw
+            if side == -1:
+                rhi *= 0.5
+            side = -1
+    rhi, fn, sigma = _slip_residual(hi, v, h, sg, eps, kf, P, U, Wt, Pc, Uc, Wc)
+    for i in range(6):
+        qdd[i] = 0.0
+    for i in range(n):
+        qdd[s0 + i] = X[i, 0] + fn * X[i, 1] - kf * fn * sigma * X[i, 2]
     return fn, sg, piv
 
 

@@ -3,11 +3,19 @@
 Each integrator is an explicit Runge-Kutta tableau ``(A, b)`` applied to the second-order
 system ``d/dt (q, qd) = (qd, qdd(q, qd))``, except the semi-implicit Euler, whose velocity
 update treats the joint damping implicitly: it solves ``(M + h D) qdd = tau - b - D qd + ...``
-then ``qd' = qd + h qdd`` and ``q' = q + h qd'`` (the implicit-damping Euler of MJX).
+then ``qd' = qd + h qdd`` and ``q' = q + h qd'`` (the implicit-damping Euler of MJX), and
+LIMEX, built for the stiff contacts: the same linearly implicit Euler step with the point
+contact's friction direction also taken at the step's end (the regularised friction's slope
+near zero slip, K f_n / eps, is what makes contact scenes stiff; the solve stays exact in f_n,
+see :func:`~biped_constraint_env.hybrid.nb_solve_mode_w`), made second order by one Richardson
+extrapolation, ``y1 = 2 Phi_{h/2}(Phi_{h/2}(y0)) - Phi_h(y0)`` (the first member of
+Deuflhard's linearly implicit extrapolation family, LIMEX). Its amplification factor for
+``y' = z y / h`` is ``2 / (1 - z/2)^2 - 1 / (1 - z)``, which goes to 0 as z -> -inf: L-stable.
 
 ``STABILITY_CONSTANT`` is the real-axis stability limit ``h lambda`` of each method for the
 linear damping mode ``qdd = -lambda qd``: 2 for explicit Euler and RK2, about 2.785 for RK4,
-unbounded for the semi-implicit method (its damping update is unconditionally stable).
+unbounded for the semi-implicit method and LIMEX (their damping update is unconditionally
+stable).
 """
 
 from __future__ import annotations
@@ -28,11 +36,15 @@ class Integrator(IntEnum):
     """Explicit midpoint, second order."""
     RK4 = 3
     """Classical Runge-Kutta, fourth order."""
+    LIMEX = 4
+    """Linearly implicit Euler (joint damping and contact friction implicit) with one
+    Richardson extrapolation: second order, L-stable, with an error estimate (see module)."""
 
 
 _TABLEAUS: dict[Integrator, tuple[list[list[float]], list[float]]] = {
     Integrator.EULER: ([[0.0]], [1.0]),
     Integrator.SEMI_IMPLICIT: ([[0.0]], [1.0]),  # unused: handled by its own update rule
+    Integrator.LIMEX: ([[0.0]], [1.0]),  # unused: handled by its own update rule
     Integrator.RK2: ([[0.0, 0.0], [0.5, 0.0]], [0.0, 1.0]),
     Integrator.RK4: (
         [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
@@ -48,6 +60,7 @@ ORDER: dict[Integrator, int] = {
     Integrator.SEMI_IMPLICIT: 1,
     Integrator.RK2: 2,
     Integrator.RK4: 4,
+    Integrator.LIMEX: 2,
 }
 """Global order of accuracy of each method."""
 
@@ -56,6 +69,7 @@ STABILITY_CONSTANT: dict[Integrator, float] = {
     Integrator.SEMI_IMPLICIT: float("inf"),
     Integrator.RK2: 2.0,
     Integrator.RK4: 2.785293563405282,
+    Integrator.LIMEX: float("inf"),
 }
 """Largest stable h * lambda on the negative real axis (lambda: eigenvalue of M^-1 D)."""
 
@@ -64,6 +78,7 @@ EVALS_PER_STEP: dict[Integrator, int] = {
     Integrator.SEMI_IMPLICIT: 1,
     Integrator.RK2: 2,
     Integrator.RK4: 4,
+    Integrator.LIMEX: 3,
 }
 """Constrained dynamics evaluations per integration step."""
 
@@ -79,7 +94,8 @@ def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:
 
 
 def parse_integrator(value: str | int | Integrator) -> Integrator:
-    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``) or code."""
+    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``,
+    ``"limex"``) or code."""
     if isinstance(value, str):
         try:
             return Integrator[value.upper()]

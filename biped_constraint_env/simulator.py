@@ -72,6 +72,7 @@ RESET = tuple(int(x) for x in _RS)
 FORCE_EVENT_FLAGS = tuple(int(EventCode(k) in FORCE_EVENTS) for k in range(N_GUARDS))
 N_STAGES = tuple(EVALS_PER_STEP[Integrator(m)] for m in range(len(Integrator)))
 SEMI_IMPLICIT = int(Integrator.SEMI_IMPLICIT)
+LIMEX = int(Integrator.LIMEX)
 EVENT_PRIORITY = (5, 2, 3, 4, 1, 6, 7, 8)
 """Order in which simultaneous out-of-model guards are reported: geometry before forces."""
 
@@ -91,7 +92,8 @@ class SimOptions:
     """Numerical and modelling options of the simulator (see README, Model).
 
     Attributes:
-        integrator: ``"euler"``, ``"semi_implicit"``, ``"rk2"`` or ``"rk4"``.
+        integrator: ``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"`` or ``"limex"``
+            (linearly implicit extrapolation, L-stable, friction implicit; module integrators).
         substeps: integration steps per control period (>= 1).
         impact: ``"paper"`` (all joint velocities zero at 2->3 and 3->4) or ``"plastic"``.
         locate_events: locate guard crossings inside a substep (else switch at the sample).
@@ -331,6 +333,28 @@ def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=
         for j in range(6):
             qd1[j] = qd[j] + h * qdd[j]
             q1[j] = q[j] + h * qd1[j]
+    elif method == LIMEX:
+        # y_a: one linearly implicit Euler step of h; y_b: two of h / 2; y1 = 2 y_b - y_a
+        mr = iopt[IO_MASS_RNEA] != 0
+        qa = S[S_KQ][0]
+        va = S[S_KV][0]
+        qs = S[S_QS]
+        vs = S[S_VS]
+        nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h, fd, eps, W, mr, True)
+        for j in range(6):
+            va[j] = qd[j] + h * qdd[j]
+            qa[j] = q[j] + h * va[j]
+        h2 = 0.5 * h
+        nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h2, 0.5 * fd, eps, W, mr, True)
+        for j in range(6):
+            vs[j] = qd[j] + h2 * qdd[j]
+            qs[j] = q[j] + h2 * vs[j]
+        nb_solve_mode_w(ch, sc, mode, qs, vs, tau6, h2, 0.5 * fd, eps, W, mr, True)
+        for j in range(6):
+            qd1[j] = vs[j] + h2 * qdd[j]
+            q1[j] = qs[j] + h2 * qd1[j]
+            qd1[j] = 2.0 * qd1[j] - va[j]
+            q1[j] = 2.0 * q1[j] - qa[j]
     else:
         ns = N_STAGES[method]
         kq = S[S_KQ]
@@ -504,8 +528,9 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
     k1 = S[S_K1]
     # first-same-as-last: the accelerations of the last evaluation at the current state are
     # the first stage of the next explicit step (not with the paper's finite-difference J-dot,
-    # whose sample length changes with the step, nor for the semi-implicit method)
-    reuse = iopt[IO_JDOT_FD] == 0 and iopt[IO_INTEGRATOR] != SEMI_IMPLICIT
+    # whose sample length changes with the step, nor for the implicit methods)
+    explicit = iopt[IO_INTEGRATOR] != SEMI_IMPLICIT and iopt[IO_INTEGRATOR] != LIMEX
+    reuse = iopt[IO_JDOT_FD] == 0 and explicit
     while True:
         ch = chs[side]
         sc = scs[side]
