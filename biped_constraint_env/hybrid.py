@@ -191,7 +191,7 @@ def nb_mass_matrix_columns_w(ch, q, W):
 
 @njit(cache=True)
 def nb_solve_mode_w(
-    ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, mass_rnea=False, implicit_friction=False
+    ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, mass_rnea=False, implicit_fric=False
 ):
     """The constrained solve of paper eq. 9 for ``mode`` (1..4); qdd goes to W[W_QDD].
 
@@ -202,7 +202,7 @@ def nb_solve_mode_w(
         slip_eps: friction regularisation speed [m/s].
         W: workspace.
         mass_rnea: the mass matrix by Newton-Euler columns (paper eq. 14) instead of CRBA.
-        implicit_friction: with h_imp > 0 and a point contact, also take the friction's
+        implicit_fric: with h_imp > 0 and a point contact, also take the friction's
             direction at the step's end, ``s(v + h_imp J_t qdd)`` (see
             :func:`_solve_implicit_friction`).
 
@@ -241,7 +241,7 @@ def nb_solve_mode_w(
             nb_fk(ch, q - jdot_fd_h * qd, z6, z6, 0.0, W[W_KP])
         gamma, sg = nb_contact_rows(K, W[W_KP], qd, sc[col], slip_eps, jdot_fd_h, jac, W[W_JACP])
         fric = sc[SC_FRICTION] * sg
-        if implicit_friction and h_imp > 0.0:
+        if implicit_fric and h_imp > 0.0:
             return _solve_implicit_friction(sc, s0, n, qd, h_imp, slip_eps, gamma, sg, W)
         for i in range(n):
             A[i, n] = -(jac[1, s0 + i] - fric * jac[0, s0 + i])

@@ -94,8 +94,10 @@ def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:
 
 
 def parse_integrator(value: str | int | Integrator) -> Integrator:
-    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``,
-    ``"limex"``) or code."""
+    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``).
+
+    An integer code is accepted too.
+    """
     if isinstance(value, str):
         try:
             return Integrator[value.upper()]

@@ -7,6 +7,7 @@ overrides the task's value.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -47,10 +48,18 @@ def resolve_task(task: str, **overrides: Any) -> dict[str, Any]:
 
 
 def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOptions:
-    """The simulator options of a preset with per-option overrides (None = keep)."""
+    """The simulator options of a preset with per-option overrides (None = keep).
+
+    A preset's ``substeps`` are per the paper's 20 ms period: for another control period dt
+    they are scaled so that the substep is never longer than the preset's (RK4 x 16 per 20 ms
+    is RK4 x 4 per 5 ms, 1.25 ms substeps). An explicit ``substeps`` is per period, as given.
+    """
     if preset not in PRESETS:
         raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
     if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be a finite number > 0 [s], got {dt!r}")
+    base = PRESETS[preset]
     changes = {k: v for k, v in overrides.items() if v is not None}
-    return PRESETS[preset].replace(**changes)
+    if "substeps" not in changes:
+        changes["substeps"] = max(1, math.ceil(base.substeps * dt / PAPER_SAMPLE_TIME_S - 1e-9))
+    return base.replace(**changes)

@@ -21,7 +21,9 @@ def test_one_id_with_string_entry_points():
 
 def test_defaults_are_the_accurate_physics_and_the_walking_task():
     env = gym.make("ConstrainedBiped-v0").unwrapped
-    assert env.options == biped_constraint_env.DEFAULT_OPTIONS.replace(stop_at_switch=True)
+    assert env.options == biped_constraint_env.DEFAULT_OPTIONS.replace(
+        stop_at_switch=True, substeps=4
+    )
     assert (env.dt, env.start, env.task) == (0.005, "midstride", "walk")
     _, info = env.reset(seed=0)
     assert info["mode"] == 2
@@ -37,7 +39,11 @@ def test_paper_task_and_overrides():
     env = gym.make("ConstrainedBiped-v0", task="paper", preset="default").unwrapped
     assert env.options == biped_constraint_env.DEFAULT_OPTIONS and env.dt == 0.02
     env = gym.make("ConstrainedBiped-v0", preset="fast").unwrapped
-    assert (env.options.integrator, env.options.substeps, env.dt) == ("rk2", 4, 0.005)
+    assert (env.options.integrator, env.options.substeps, env.dt) == ("rk2", 1, 0.005)
+    # a preset keeps its substep length at any control period; explicit substeps are per period
+    assert gym.make("ConstrainedBiped-v0").unwrapped.options.substeps == 4  # 1.25 ms at 5 ms
+    assert gym.make("ConstrainedBiped-v0", dt=0.007).unwrapped.options.substeps == 6
+    assert gym.make("ConstrainedBiped-v0", substeps=3).unwrapped.options.substeps == 3
     assert set(TASKS) == {"walk", "paper"}
 
 
