@@ -52,6 +52,10 @@ def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> 
         kind = hints[f.name]
         if getattr(kind, "__origin__", None) is tuple:
             parser.add_argument(flag, nargs="+", default=None, help=f"(default {f.default})")
+        elif kind is bool:  # a bare flag means true; "--flag false" still reads
+            parser.add_argument(
+                flag, nargs="?", const="true", default=None, help=f"(default {f.default})"
+            )
         else:
             parser.add_argument(flag, default=None, help=f"(default {f.default})")
     args = parser.parse_args(argv)

@@ -2,6 +2,7 @@
 
     python -m training.optimize_open_loop [--iterations 300] [--population 512] [--restarts 3]
     python -m training.optimize_open_loop --start midstride   # the start's velocity searched too
+    python -m training.optimize_open_loop --ray [--ray-address HOST:PORT]   # populations on Ray
 
 Searches the constant torques per model (4 x 5, within the env's +-150 N m) and the initial
 state that maximise completed walking steps under **strict** physics (the
@@ -35,6 +36,7 @@ from biped_constraint_env.actions import TORQUE_LIMIT_NM
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimArrays, advance
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start, start_slots
 from training.common import make_run_dir, parse_config, progress
+from training.distributed import cpu_count, init_ray, run_tasks, shutdown
 
 
 @dataclass
@@ -51,6 +53,8 @@ class OptimiseConfig:
     seed: int = 0
     out_dir: Path = Path("runs")
     progress: bool = True
+    ray: bool = False  # score each population in chunks, as Ray tasks on a local Ray instance
+    ray_address: str = ""  # HOST:PORT of a Ray cluster to score them on
 
 
 def start_state(x: np.ndarray, start: str) -> tuple[np.ndarray, np.ndarray, int]:
@@ -91,6 +95,22 @@ def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS, s
     return 100 * steps + 10 * furthest + alive_s, steps
 
 
+def score_population(X: np.ndarray, cfg: OptimiseConfig):
+    """:func:`score` of a population: one batch here, or one chunk per Ray CPU as Ray tasks.
+
+    Every candidate is simulated independently, so the scores are the same either way.
+    """
+    if not (cfg.ray or cfg.ray_address):
+        return score(X, cfg.seconds, start=cfg.start)
+    init_ray(cfg.ray_address or None)
+    jobs = [
+        (chunk, cfg.seconds, None, DEFAULT_OPTIONS, cfg.start)
+        for chunk in np.array_split(X, min(len(X), cpu_count()))
+    ]
+    parts = run_tasks(score, jobs, use_ray=True, ray_address=cfg.ray_address)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
 def search(cfg: OptimiseConfig, seed: int, show: bool):
     """One CMA-ES search; returns ((score, candidate, steps), history)."""
     import cma
@@ -112,7 +132,7 @@ def search(cfg: OptimiseConfig, seed: int, show: bool):
         Z = np.array(es.ask())
         X = mu + sd * Z
         X[:, :20] = np.clip(X[:, :20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)
-        s, steps = score(X, cfg.seconds, start=cfg.start)
+        s, steps = score_population(X, cfg)
         es.tell(list(Z), list(-s))
         i = int(np.argmax(s))
         if s[i] > best[0]:
@@ -156,18 +176,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
     print(f"run directory: {rd}")
     results = []
-    for r in range(cfg.restarts):
-        best, history = search(cfg, cfg.seed + r, cfg.progress)
-        results.append(
-            {
-                "seed": cfg.seed + r,
-                "score": best[0],
-                "steps": best[2],
-                "x": best[1].tolist(),
-                "history": history,
-            }
-        )
-        print(f"search {cfg.seed + r}: best score {best[0]:.2f}, {best[2]} steps", flush=True)
+    try:
+        for r in range(cfg.restarts):
+            best, history = search(cfg, cfg.seed + r, cfg.progress)
+            results.append(
+                {
+                    "seed": cfg.seed + r,
+                    "score": best[0],
+                    "steps": best[2],
+                    "x": best[1].tolist(),
+                    "history": history,
+                }
+            )
+            print(f"search {cfg.seed + r}: best score {best[0]:.2f}, {best[2]} steps", flush=True)
+    finally:
+        shutdown()
     top = max(results, key=lambda d: d["score"])
     x = np.array(top["x"])
     x[:20] = np.clip(x[:20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)

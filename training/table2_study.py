@@ -1,15 +1,18 @@
 """How far does the paper's Table 2 walk? A search over the paper's open choices.
 
     python -m training.table2_study [--postures 64] [--seconds 10] [--out-dir runs]
+                                    [--ray | --ray-address HOST:PORT]
 
 Readings searched (all combinations): the 32 per-joint sign mappings of the paper's torques
 onto ours; sampled model-1 postures (stance foot flat, swing foot flat in the air, every
 point above the floor; the nominal posture first); the friction ratio K in {0.3, 0.5, 1.0};
 the impact option ("paper", "plastic"); the numerics ("paper": explicit Euler at 20 ms,
-switching at the sample, finite-difference J-dot, foot weight left out; "default": RK2 x 4,
+switching at the sample, finite-difference J-dot, foot weight left out; "default": RK4 x 16,
 located events, exact J-dot, foot weight included); and strict versus lenient end checks.
 Table 2 is applied as a per-model torque table, so the torque changes exactly at each model
-switch. Every reading runs in one batch of the compiled simulator. The best strict and best
+switch. Every option set's readings run in one batch of the compiled simulator, a Ray task
+each with ``--ray`` (training/distributed.py; the same result as the serial run). The best
+strict and best
 lenient readings get a local posture refinement (random search) and a sensitivity test
 (completed steps under uniform posture noise of +-0.01 rad, 100 samples).
 
@@ -24,6 +27,7 @@ import csv
 import gzip
 import itertools
 import json
+import sys
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -43,7 +47,8 @@ from biped_constraint_env.simulator import (
     keypoints,
 )
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
-from training.common import make_run_dir, parse_config, progress
+from training.common import make_run_dir, parse_config
+from training.distributed import TasksFailed, run_tasks, shutdown
 from training.open_loop import TABLES
 
 SIGNS = np.array(list(itertools.product((1, -1), repeat=5)), dtype=float)
@@ -59,6 +64,8 @@ class StudyConfig:
     seed: int = 0
     out_dir: Path = Path("runs")
     progress: bool = True
+    ray: bool = False  # run the option sets as Ray tasks on a local Ray instance
+    ray_address: str = ""  # HOST:PORT of a Ray cluster to run them on
 
 
 def sample_postures(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -80,6 +87,8 @@ def sample_postures(n: int, rng: np.random.Generator) -> np.ndarray:
 def run_batch(tables: np.ndarray, postures: np.ndarray, options, seconds: float, params=None):
     """Roll out each (table, posture) pair; returns steps, distance [m], end code per reading."""
     params = params or paper_biped()
+    if not (isinstance(seconds, (int, float)) and np.isfinite(seconds) and seconds > 0):
+        raise ValueError(f"seconds must be a finite number > 0, got {seconds!r}")
     n = len(tables)
     sim = SimArrays(n)
     sim.q[:] = postures
@@ -151,9 +160,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     post_idx = np.tile(np.arange(len(postures)), len(SIGNS))
     rows, summary = [], {"readings_per_option_set": len(qs), "option_sets": {}}
     sets = list(option_sets())
-    for name, opts, K in progress(sets, len(sets), "Table 2 study", cfg.progress):
-        params = dataclasses.replace(paper_biped(), friction_ratio=K)
-        steps, root_y, end = run_batch(tables, qs, opts, cfg.seconds, params)
+    jobs = [
+        (tables, qs, opts, cfg.seconds, dataclasses.replace(paper_biped(), friction_ratio=K))
+        for _, opts, K in sets
+    ]
+    try:
+        batches = run_tasks(
+            run_batch,
+            jobs,
+            use_ray=cfg.ray,
+            ray_address=cfg.ray_address,
+            desc="Table 2 study",
+            show=cfg.progress,
+        )
+    except TasksFailed as e:  # keep the option sets that ran; name the failed ones
+        print(e, file=sys.stderr)
+        batches = e.results
+        summary["failed_option_sets"] = {sets[i][0]: err for i, _, err in e.failures}
+    finally:
+        shutdown()
+    for (name, _, _), batch in zip(sets, batches, strict=True):
+        if batch is None:
+            continue
+        steps, root_y, end = batch
         ends = Counter(EventCode(int(e)).name.lower() if e >= 0 else "time_limit" for e in end)
         k = int(np.argmax(steps * 1000 + root_y))
         summary["option_sets"][name] = {
@@ -184,6 +213,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     # refinement and sensitivity of the best strict and the best lenient reading
     for mode in ("strict", "lenient"):
         cands = [(v["max_steps"], n) for n, v in summary["option_sets"].items() if f"/{mode}/" in n]
+        if not cands:
+            continue
         steps_best, name = max(cands)
         entry = summary["option_sets"][name]
         opts = next(o for n, o, _ in sets if n == name)
@@ -228,9 +259,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{v['readings_with_ge4_steps']:>5} {v['max_steps']:>4}  {top[0]} ({top[1]})"
         )
     for mode in ("strict", "lenient"):
-        print(f"best {mode}:", json.dumps(summary[f"best_{mode}"]))
+        print(f"best {mode}:", json.dumps(summary.get(f"best_{mode}")))
     print(f"run directory: {rd}")
-    return 0
+    return 1 if "failed_option_sets" in summary else 0
 
 
 def _figures(summary: dict, rd: Path) -> None:

@@ -2,6 +2,7 @@
 
     python -m training.tune_model_controller [--iterations 10] [--population 24] [--cap 12]
         [--init gains.json] [--noise 0.5] [--out results/tune_mc] [--workers 2]
+        [--ray | --ray-address HOST:PORT]
 
 Every candidate (a dict of :data:`training.model_controller.DEFAULT_GAINS` overrides) runs
 through the env (default physics, strict, ``dt=0.005``, ``stop_at_switch=True``) from every
@@ -12,20 +13,22 @@ candidate): a gait that tolerates it is a better teacher for a network, whose er
 tolerates too. Score: the mean of the completed steps over the starts, plus 0.2 x their
 minimum (a robust gait counts more than one lucky start). CMA-ES searches the tuned gains
 scaled to [0, 1] within :data:`BOUNDS` and writes ``best_gains.json`` (the best candidate
-seen) and ``history.csv`` (one row per candidate) into ``--out``.
+seen) and ``history.csv`` (one row per candidate) into ``--out``. The runs of one iteration are
+independent: ``--workers`` local processes, or Ray tasks with ``--ray`` (training/distributed.py),
+with the same results in the same order.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-from multiprocessing import Pool
 from pathlib import Path
 
 import cma
 import numpy as np
 
 from training.common import progress
+from training.distributed import run_tasks, shutdown
 from training.model_controller import (
     DEFAULT_GAINS,
     ModelController,
@@ -108,10 +111,6 @@ def run_start(
     return steps, dist, reason
 
 
-def _job(args):
-    return run_start(*args)
-
-
 def score(results) -> float:
     """Mean completed steps over the starts + 0.2 x the minimum."""
     steps = np.array([r[0] for r in results], dtype=float)
@@ -128,7 +127,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--sigma", type=float, default=0.15, help="initial spread / range width")
     ap.add_argument("--noise", type=float, default=0.0, help="torque noise std [N m]")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=2, help="local processes (without Ray)")
+    ap.add_argument("--ray", action="store_true", help="run the starts as tasks on local Ray")
+    ap.add_argument("--ray-address", default="", help="HOST:PORT of a Ray cluster to run on")
     ap.add_argument("--starts", type=int, default=len(STARTS), help="score the first N starts")
     ap.add_argument("--out", type=Path, default=Path("results/tune_mc"))
     a = ap.parse_args(argv)
@@ -151,7 +152,7 @@ def main(argv: list[str] | None = None) -> None:
     best = (-np.inf, dict(init))
     rows = []
     header = ["iteration", "score", *[f"start{i}" for i in range(len(starts))], *names]
-    with Pool(a.workers) as pool:
+    try:
         for it in progress(range(a.iterations), a.iterations, "CMA-ES"):
             cands = [np.asarray(c) for c in es.ask()]
             gains = [
@@ -163,7 +164,9 @@ def main(argv: list[str] | None = None) -> None:
                 for g in gains
                 for k, (r, th) in enumerate(starts)
             ]
-            res = pool.map(_job, jobs, chunksize=1)
+            res = run_tasks(
+                run_start, jobs, use_ray=a.ray, ray_address=a.ray_address, workers=a.workers
+            )
             per = [res[i * len(starts) : (i + 1) * len(starts)] for i in range(len(cands))]
             scores = np.array([score(r) for r in per])
             es.tell(cands, list(-scores))
@@ -180,6 +183,8 @@ def main(argv: list[str] | None = None) -> None:
                 header=",".join(header),
                 comments="",
             )
+    finally:
+        shutdown()
     print(f"best score {best[0]:.2f}; gains in {a.out / 'best_gains.json'}")
 
 

@@ -1,0 +1,80 @@
+"""Ray (the optional ``[distributed]`` extra): studies bit-identical to serial, clear errors.
+
+The fast checks (a tiny Table 2 study on a local 2-CPU Ray instance, an unreachable address,
+a failing task) run by default when Ray is installed; the sweep and RLlib runs are ``slow``.
+"""
+
+import gzip
+import json
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from biped_constraint_env.simulator import PAPER_OPTIONS
+from training import table2_study
+from training.open_loop import TABLES
+from training.distributed import TasksFailed, init_ray, run_tasks, shutdown
+
+ray = pytest.importorskip("ray")
+
+
+@pytest.fixture
+def local_ray():
+    shutdown()
+    init_ray(num_cpus=2)
+    yield
+    shutdown()
+    assert not ray.is_initialized()
+
+
+def _study(tmp_path, *flags):
+    out = tmp_path / ("ray" if flags else "serial")
+    argv = ["--postures", "2", "--seconds", "0.4", "--refine-iterations", "10"]
+    assert table2_study.main([*argv, "--progress", "false", "--out-dir", str(out), *flags]) == 0
+    (run,) = (out / "table2_study").iterdir()
+    with gzip.open(run / "readings.csv.gz", "rt") as fh:
+        return fh.read(), json.loads((run / "summary.json").read_text())
+
+
+def test_table2_study_on_ray_equals_serial(tmp_path, local_ray):
+    serial = _study(tmp_path)
+    on_ray = _study(tmp_path, "--ray")
+    assert serial[0].count("\n") == 24 * 64 + 1  # 24 option sets x 32 signs x 2 postures
+    assert on_ray == serial
+
+
+def test_failed_task_named_with_its_arguments_others_kept(local_ray):
+    # a function the workers import by name (a test module's own cannot be): bad durations fail
+    table, posture = TABLES["table2"][None], np.zeros((1, 6))
+    jobs = [(table, posture, PAPER_OPTIONS, s) for s in (0.04, -1.0, 0.04, np.nan)]
+    with pytest.raises(TasksFailed) as e:
+        run_tasks(table2_study.run_batch, jobs, use_ray=True)
+    kept = e.value.results
+    assert kept[1] is None and kept[3] is None
+    assert all(np.array_equal(a, b) for a, b in zip(kept[0], kept[2], strict=True))
+    assert [i for i, _, _ in e.value.failures] == [1, 3]
+    assert "task 1 (array(1, 4, 5) float64, array(1, 6) float64, SimOptions(" in str(e.value)
+    assert "-1.0) failed: ValueError: seconds must be" in str(e.value)
+
+
+def test_serial_failures_reported_the_same_way():
+    with pytest.raises(TasksFailed) as e:
+        run_tasks(np.linalg.inv, [(np.eye(2),), (np.zeros((3, 3)),)])
+    assert np.array_equal(e.value.results[0], np.eye(2)) and e.value.results[1] is None
+    assert "task 1 (array(3, 3) float64) failed: LinAlgError" in str(e.value)
+
+
+def test_unreachable_address_fails_fast_and_names_it():
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"127.0.0.1:{port}"
+    t0 = time.monotonic()
+    with pytest.raises(ConnectionError, match=address):
+        run_tasks(np.sqrt, [(1.0,)], ray_address=address)
+    assert time.monotonic() - t0 < 30  # seconds, not Ray's minute of retries
+    assert not ray.is_initialized()
+    with pytest.raises(ValueError, match="HOST:PORT"):
+        init_ray("not-an-address")
