@@ -4,18 +4,20 @@ The fast checks (a tiny Table 2 study on a local 2-CPU Ray instance, an unreacha
 a failing task) run by default when Ray is installed; the sweep and RLlib runs are ``slow``.
 """
 
+import csv
 import gzip
 import json
 import socket
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from biped_constraint_env.simulator import PAPER_OPTIONS
 from training import table2_study
-from training.open_loop import TABLES
 from training.distributed import TasksFailed, init_ray, run_tasks, shutdown
+from training.open_loop import TABLES
 
 ray = pytest.importorskip("ray")
 
@@ -78,3 +80,47 @@ def test_unreachable_address_fails_fast_and_names_it():
     assert not ray.is_initialized()
     with pytest.raises(ValueError, match="HOST:PORT"):
         init_ray("not-an-address")
+
+
+@pytest.mark.slow
+def test_sweep_runs_two_trials_to_completion(tmp_path):
+    from training import sweep
+
+    tiny = [
+        "total_timesteps=256",
+        "n_envs=2",
+        "n_steps=128",
+        "batch_size=64",
+        "n_epochs=1",
+        "eval_freq=100000",
+        "checkpoint_freq=100000",
+    ]
+    argv = ["--config", "training/configs/ppo_scratch.toml", "--seeds", "0", "1"]
+    argv += ["--set", *tiny, "--eval-episodes", "1", "--num-cpus", "2", "--out-dir", str(tmp_path)]
+    assert sweep.main(argv) == 0
+    assert not ray.is_initialized()
+    with open(tmp_path / "sweep_ppo_scratch" / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["seed"] for r in rows] == ["0", "1"]
+    for r in rows:
+        assert float(r["steps_mean"]) >= 0 and float(r["train_wall_s"]) > 0
+        assert (Path(r["run_dir"]) / "model.zip").is_file()  # the trial's checkpoint
+
+
+@pytest.mark.slow
+def test_rllib_example_trains_one_iteration(capsys):
+    from training import rllib_example
+
+    assert rllib_example.main(["--iterations", "1", "--env-runners", "2", "--batch", "250"]) == 0
+    assert "iteration 0: 250" in capsys.readouterr().out
+    assert not ray.is_initialized()
+
+
+def test_sweep_rejects_unknown_settings(tmp_path):
+    from training import sweep
+
+    base = ["--config", "training/configs/ppo_scratch.toml", "--out-dir", str(tmp_path)]
+    for bad in (["--set", "no_such_field=1"], ["--grid", "seed=1,2"], ["--set", "gamma"]):
+        with pytest.raises(SystemExit):
+            sweep.main(base + bad)
+    assert not ray.is_initialized()

@@ -111,6 +111,8 @@ TRAIN_SEED_OFFSET = 1_000_000
 demonstrations from ``DEMO_SEED_OFFSET + ...``, the imitation and periodic evaluations from
 20,000 and 10,000 on: never from the final evaluation's seeds (0, 1, ... in evaluate)."""
 DEMO_SEED_OFFSET = 2_000_000
+SELECTION_SEED_OFFSET = 10_000
+"""Seeds of the periodic evaluations that select ``best/`` (and rank sweep trials)."""
 
 
 def bc_weights(cfg: PPOConfig) -> np.ndarray:
@@ -292,7 +294,10 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
 
             actor = policy_actor(self.model, vecnorm, cfg)
             eps = run_episodes(
-                actor, cfg.env_kwargs(), range(10_000, 10_000 + cfg.eval_episodes), cfg.env_id
+                actor,
+                cfg.env_kwargs(),
+                range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + cfg.eval_episodes),
+                cfg.env_id,
             )
             steps = np.array([e["steps_completed"] for e in eps])
             dist = np.array([e["distance_m"] for e in eps])

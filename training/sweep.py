@@ -1,0 +1,176 @@
+r"""Multi-seed runs and hyperparameter sweeps of the PPO training, as Ray Tune trials.
+
+    python -m training.sweep --config training/configs/ppo_walker.toml --seeds 0 1 2
+    python -m training.sweep --config training/configs/ppo_scratch.toml --seeds 0 1 \\
+        --grid learning_rate=1e-4,3e-4 --set total_timesteps=200000 [--ray-address HOST:PORT]
+
+Every trial is one run of ``training.train_ppo`` (the same code and config as a single run:
+``--config``, then ``--set`` values, then the trial's grid values and seed), in its own Tune
+trial process with one CPU and one torch thread. When training ends, the final network is
+evaluated alone on ``--eval-episodes`` seeds from 10000 (the selection seeds: never used in
+training, and not the final evaluation's seeds 0, 1, ... of ``training.evaluate``); the trial
+reports completed steps and distance, with the run directory (model, best/, checkpoints/) as
+its checkpoint. The trials run on a local Ray instance, or on a cluster with ``--ray-address``
+(every node needs the project installed, at the same path when the config names files). The
+results table is printed and written to ``results.csv`` in the sweep's directory
+(``--out-dir/sweep_<name>``); Tune's own records of every trial are beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from training.distributed import init_ray, shutdown
+
+METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
+
+
+def parse_assignments(items: list[str], flag: str, grid: bool) -> dict[str, list[str] | str]:
+    """``key=value`` (``--set``) or ``key=v1,v2`` (``--grid``) items; the keys are PPOConfig's."""
+    from dataclasses import fields
+
+    from training.train_ppo import PPOConfig
+
+    known = {f.name for f in fields(PPOConfig)}
+    out: dict[str, list[str] | str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not value:
+            raise ValueError(f"{flag} takes key=value, got {item!r}")
+        if key not in known or key in ("seed", "out_dir", "resume", "progress"):
+            raise ValueError(f"{flag}: {key!r} is not a settable PPOConfig field")
+        out[key] = [v.strip() for v in value.split(",")] if grid else value.strip()
+    return out
+
+
+def evaluate_run(run: Path, episodes: int) -> dict[str, float]:
+    """Steps and distance of a run's final network alone on the selection seeds.
+
+    They start at 10000: the final evaluation's seeds (0, 1, ...) stay unseen by the ranking.
+    """
+    from training.evaluate import load, policy_actor, run_episodes
+    from training.train_ppo import SELECTION_SEED_OFFSET
+
+    model, vecnorm, cfg = load(run)
+    actor = policy_actor(model, vecnorm, cfg)
+    seeds = range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + episodes)
+    eps = run_episodes(actor, cfg.env_kwargs(), seeds, cfg.env_id)
+    steps = np.array([e["steps_completed"] for e in eps], dtype=float)
+    return {
+        "steps_mean": float(steps.mean()),
+        "steps_min": float(steps.min()),
+        "distance_mean_m": float(np.mean([e["distance_m"] for e in eps])),
+    }
+
+
+def trial(config: dict) -> None:
+    """One Tune trial: train_ppo with the trial's settings, evaluate, report with checkpoint."""
+    import time
+
+    import torch
+    from ray import tune
+
+    torch.set_num_threads(1)
+    from training import train_ppo
+
+    out = Path(tune.get_context().get_trial_dir())
+    argv = ["--config", config["config"], "--seed", str(config["seed"]), "--progress", "false"]
+    for key, value in config["settings"].items():
+        argv += [f"--{key.replace('_', '-')}", str(value)]
+    argv += ["--out-dir", str(out)]
+    t0 = time.time()
+    train_ppo.main(argv)
+    wall = time.time() - t0
+    (run,) = (out / "train_ppo").iterdir()
+    metrics = {**evaluate_run(run, config["eval_episodes"]), "train_wall_s": wall}
+    tune.report(metrics, checkpoint=tune.Checkpoint.from_directory(run))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the sweep and print its results table."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", type=Path, required=True, help="train_ppo TOML config")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="one trial per seed")
+    ap.add_argument("--grid", nargs="*", default=[], help="key=v1,v2: one trial per value")
+    ap.add_argument("--set", nargs="*", default=[], dest="settings", help="key=value, all trials")
+    ap.add_argument("--eval-episodes", type=int, default=10)
+    ap.add_argument("--ray-address", default="", help="HOST:PORT of a Ray cluster (else local)")
+    ap.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray instance")
+    ap.add_argument("--name", default="", help="sweep name (default: the config's stem)")
+    ap.add_argument("--out-dir", type=Path, default=Path("runs"))
+    a = ap.parse_args(argv)
+    if not a.config.is_file():
+        ap.error(f"--config: no such file {a.config}")
+    if a.eval_episodes < 1:
+        ap.error("--eval-episodes must be >= 1")
+    try:
+        fixed = parse_assignments(a.settings, "--set", grid=False)
+        grid = parse_assignments(a.grid, "--grid", grid=True)
+    except ValueError as e:
+        ap.error(str(e))
+    overlap = set(fixed) & set(grid)
+    if overlap:
+        ap.error(f"{sorted(overlap)} given to both --set and --grid")
+    from ray import tune
+
+    name = a.name or f"sweep_{a.config.stem}"
+    storage = (a.out_dir / name).resolve()
+    combos = [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())]
+    space = {
+        "config": str(a.config.resolve()),
+        "seed": tune.grid_search(list(a.seeds)),
+        "settings": tune.grid_search([{**fixed, **c} for c in combos]),
+        "eval_episodes": a.eval_episodes,
+    }
+    init_ray(a.ray_address or None, num_cpus=a.num_cpus)
+    try:
+        tuner = tune.Tuner(
+            tune.with_resources(trial, {"cpu": 1}),
+            param_space=space,
+            run_config=tune.RunConfig(name="tune", storage_path=str(storage), verbose=1),
+        )
+        results = tuner.fit()
+    finally:
+        shutdown()
+    rows = []
+    for r in results:
+        cfg = r.config or {}
+        row = {"seed": cfg.get("seed"), **cfg.get("settings", {})}
+        if r.error is not None:
+            row["error"] = f"{type(r.error).__name__}: {str(r.error).splitlines()[0]}"
+        else:
+            row.update({k: r.metrics.get(k) for k in METRICS})
+            row["run_dir"] = r.checkpoint.path if r.checkpoint else ""
+        rows.append(row)
+    rows.sort(
+        key=lambda d: (str(sorted((k, str(v)) for k, v in d.items() if k != "seed")), d["seed"])
+    )
+    _write_table(rows, storage / "results.csv")
+    print(f"sweep directory: {storage}")
+    return 1 if any("error" in r for r in rows) else 0
+
+
+def _write_table(rows: list[dict], path: Path) -> None:
+    import csv
+
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols)
+        w.writeheader()
+        w.writerows(rows)
+    print("| " + " | ".join(cols) + " |")
+    print("|" + "---|" * len(cols))
+    for r in rows:
+        cells = [
+            f"{v:.3g}" if isinstance(v, float) else str(v) for v in (r.get(c, "") for c in cols)
+        ]
+        print("| " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
