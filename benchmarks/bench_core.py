@@ -121,12 +121,21 @@ def main(argv=None) -> int:
     ev = np.zeros((MAX_EVENTS, 5))
     forces = np.zeros(5)
     print()
+    t_eval = rows[0][2]  # model 2, in a loop: the unit of the evaluation-equivalents
     for opts in (DEFAULT_OPTIONS.replace(strict=False), FAST_OPTIONS.replace(strict=False)):
-        _control_steps(params, opts, chs, scs, q0, ev, forces, args)
+        _control_steps(params, opts, chs, scs, q0, ev, forces, args, 0.02, t_eval)
+    # the env's default control period (the walking task) with the env's own options
+    import gymnasium as gym
+
+    import biped_constraint_env  # noqa: F401  (registers the id)
+
+    env = gym.make("ConstrainedBiped-v0").unwrapped
+    opts = env.options.replace(strict=False, stop_at_switch=False)
+    _control_steps(params, opts, chs, scs, q0, ev, forces, args, env.dt, t_eval)
     return 0
 
 
-def _control_steps(params, opts, chs, scs, q0, ev, forces, args):
+def _control_steps(params, opts, chs, scs, q0, ev, forces, args, dt, t_eval):
     iopt, fopt, a, b = opts.packed
     state0 = SimState(0.0, 1, 0, q0, np.zeros(6))
     for label, torque in (
@@ -142,11 +151,11 @@ def _control_steps(params, opts, chs, scs, q0, ev, forces, args):
             vv[:] = 0.0
             ist[:] = (1, 0, 0, 0)
             fst[:] = 0.0
-            nb_advance(chs, scs, qq, vv, ist, fst, table, 0.02, iopt, fopt, a, b, ev, forces)
+            nb_advance(chs, scs, qq, vv, ist, fst, table, dt, iopt, fopt, a, b, ev, forces)
 
         compiled()
         t_c = _timeit(compiled, max(args.n // 10, 100))
-        t_api = _timeit(lambda: step(params, state0, table, 0.02, opts), max(args.n // 20, 100))
+        t_api = _timeit(lambda: step(params, state0, table, dt, opts), max(args.n // 20, 100))
         n_b = 256
         Q = np.tile(q0, (n_b, 1))
         QD = np.zeros((n_b, 6))
@@ -165,15 +174,15 @@ def _control_steps(params, opts, chs, scs, q0, ev, forces, args):
             FST[:] = 0.0
             STATUS[:] = 0
             nb_advance_batch(
-                chs, scs, Q, QD, IST, FST, TAU, 0.02, iopt, fopt, a, b, EV, FO, STATUS, NEV
+                chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FO, STATUS, NEV
             )
 
         batch()
         t_b = _timeit(batch, 20) / n_b
         print(
-            f"20 ms control step ({opts.integrator} x {opts.substeps}, {label}): "
+            f"{dt * 1e3:g} ms control step ({opts.integrator} x {opts.substeps}, {label}): "
             f"simulator.step {t_api:.1f} us | compiled call {t_c:.1f} us | "
-            f"batched, per simulator {t_b:.1f} us"
+            f"batched, per simulator {t_b:.1f} us = {t_b / t_eval:.1f} evaluation-equivalents"
         )
     return 0
 
