@@ -47,6 +47,16 @@ def test_table2_study_on_ray_equals_serial(tmp_path, local_ray):
     assert on_ray == serial
 
 
+def test_open_loop_population_on_ray_equals_serial(local_ray):
+    from training.optimize_open_loop import OptimiseConfig, score_population
+
+    X = np.random.default_rng(0).normal(0, 30, (10, 25))
+    X[:, 20:] = X[:, 20:] / 100
+    serial = score_population(X, OptimiseConfig(seconds=0.5))
+    on_ray = score_population(X, OptimiseConfig(seconds=0.5, ray=True))  # 2 chunks of 5
+    assert all(np.array_equal(a, b) for a, b in zip(serial, on_ray, strict=True))
+
+
 def test_failed_task_named_with_its_arguments_others_kept(local_ray):
     # a function the workers import by name (a test module's own cannot be): bad durations fail
     table, posture = TABLES["table2"][None], np.zeros((1, 6))
