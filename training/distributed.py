@@ -103,6 +103,19 @@ def init_ray(address: str | None = None, num_cpus: int | None = None):
     return ray
 
 
+def connect(use_ray: bool, address: str = "", num_cpus: int | None = None) -> None:
+    """For a command line: start or join Ray up front when asked, before any work is done.
+
+    An unreachable address or a missing Ray ends the program with a one-line message.
+    """
+    if not (use_ray or address):
+        return
+    try:
+        init_ray(address or None, num_cpus=num_cpus)
+    except (ConnectionError, ImportError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
+
+
 def run_tasks(
     fn: Callable[..., Any],
     jobs: Sequence[tuple],

@@ -36,7 +36,7 @@ from biped_constraint_env.actions import TORQUE_LIMIT_NM
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimArrays, advance
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start, start_slots
 from training.common import make_run_dir, parse_config, progress
-from training.distributed import cpu_count, init_ray, run_tasks, shutdown
+from training.distributed import connect, cpu_count, init_ray, run_tasks, shutdown
 
 
 @dataclass
@@ -173,6 +173,7 @@ def robustness(cfg, seeds: int = 10) -> tuple[dict, list[int]]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the searches and write the best table."""
     cfg = parse_config(OptimiseConfig, argv, __doc__.splitlines()[0])
+    connect(cfg.ray, cfg.ray_address)
     rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
     print(f"run directory: {rd}")
     results = []

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from training.distributed import init_ray, shutdown
+from training.distributed import connect, shutdown
 
 ENV = "biped_constraint_env:ConstrainedBiped-v0"
 
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if a.iterations < 1 or a.env_runners < 1 or a.batch < 250:
         ap.error("need iterations >= 1, env-runners >= 1, batch >= 250")
-    init_ray(a.ray_address or None)
+    connect(True, a.ray_address)
     try:
         algo = build(a.env_runners, a.seed, a.batch)
         for it in range(a.iterations):

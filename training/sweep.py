@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.distributed import init_ray, shutdown
+from training.distributed import connect, shutdown
 
 METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
 
@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         "settings": tune.grid_search([{**fixed, **c} for c in combos]),
         "eval_episodes": a.eval_episodes,
     }
-    init_ray(a.ray_address or None, num_cpus=a.num_cpus)
+    connect(True, a.ray_address, a.num_cpus)
     try:
         tuner = tune.Tuner(
             tune.with_resources(trial, {"cpu": 1}),

@@ -48,7 +48,7 @@ from biped_constraint_env.simulator import (
 )
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
 from training.common import make_run_dir, parse_config
-from training.distributed import TasksFailed, run_tasks, shutdown
+from training.distributed import TasksFailed, connect, run_tasks, shutdown
 from training.open_loop import TABLES
 
 SIGNS = np.array(list(itertools.product((1, -1), repeat=5)), dtype=float)
@@ -150,6 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     import dataclasses
 
     cfg = parse_config(StudyConfig, argv, __doc__.splitlines()[0])
+    connect(cfg.ray, cfg.ray_address)
     rng = np.random.default_rng(cfg.seed)
     postures = sample_postures(cfg.postures, rng)
     rd = make_run_dir(cfg.out_dir, "table2_study", "ConstrainedBiped-v0", cfg.seed, cfg, argv)

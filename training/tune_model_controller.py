@@ -28,7 +28,7 @@ import cma
 import numpy as np
 
 from training.common import progress
-from training.distributed import run_tasks, shutdown
+from training.distributed import connect, run_tasks, shutdown
 from training.model_controller import (
     DEFAULT_GAINS,
     ModelController,
@@ -140,6 +140,7 @@ def main(argv: list[str] | None = None) -> None:
     if not 1 <= a.starts <= len(STARTS):
         ap.error(f"--starts must be in 1..{len(STARTS)}")
     starts = STARTS[: a.starts]
+    connect(a.ray, a.ray_address)
     init = {**DEFAULT_GAINS, **(json.loads(a.init.read_text()) if a.init else {})}
     names = list(BOUNDS)
     lo = np.array([BOUNDS[n][0] for n in names])
