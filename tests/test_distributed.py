@@ -92,6 +92,15 @@ def test_unreachable_address_fails_fast_and_names_it():
         init_ray("not-an-address")
 
 
+def test_study_command_stops_at_a_bad_address_before_any_work(tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{s.getsockname()[1]}"
+    with pytest.raises(SystemExit, match=f"error: no Ray cluster reachable at '{address}'"):
+        table2_study.main(["--ray-address", address, "--out-dir", str(tmp_path)])
+    assert not any(tmp_path.iterdir())  # no run directory started
+
+
 @pytest.mark.slow
 def test_sweep_runs_two_trials_to_completion(tmp_path):
     from training import sweep
