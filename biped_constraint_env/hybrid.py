@@ -117,12 +117,49 @@ def nb_lu_solve_inplace(m, x, n):
     m is destroyed; x holds the solution. Returns the pivot ratio min|u_ii| / max|u_ii|, a
     cheap conditioning indicator (0: singular).
     """
-    return nb_lu_solve_multi(m, x.reshape((x.shape[0], 1)), n, 1)
+    umin = INF
+    umax = 0.0
+    for k in range(n):
+        p = k
+        big = abs(m[k, k])
+        for i in range(k + 1, n):
+            if abs(m[i, k]) > big:
+                big = abs(m[i, k])
+                p = i
+        if p != k:
+            for j in range(n):
+                t = m[k, j]
+                m[k, j] = m[p, j]
+                m[p, j] = t
+            t = x[k]
+            x[k] = x[p]
+            x[p] = t
+        piv = m[k, k]
+        umin = min(umin, abs(piv))
+        umax = max(umax, abs(piv))
+        if piv == 0.0:
+            continue
+        for i in range(k + 1, n):
+            f = m[i, k] / piv
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    m[i, j] -= f * m[k, j]
+                x[i] -= f * x[k]
+    for k in range(n - 1, -1, -1):
+        s = x[k]
+        for j in range(k + 1, n):
+            s -= m[k, j] * x[j]
+        x[k] = s / m[k, k]
+    return umin / umax if umax > 0.0 else 0.0
 
 
 @njit(cache=True)
 def nb_lu_solve_multi(m, x, n, nr):
-    """:func:`nb_lu_solve_inplace` for the nr right-hand sides in the columns of x[:n, :nr]."""
+    """:func:`nb_lu_solve_inplace` for the nr right-hand sides in the columns of x[:n, :nr].
+
+    Kept apart from the one-right-hand-side solve of every evaluation: routing that through
+    this function (x viewed as (n, 1)) made a model-3 evaluation 1.4x slower (0.74 -> 1.04 us).
+    """
     umin = INF
     umax = 0.0
     for k in range(n):
