@@ -138,18 +138,14 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         shutdown()
     rows = []
-    for r in results:
-        cfg = r.config or {}
-        row = {"seed": cfg.get("seed"), **cfg.get("settings", {})}
+    for r in sorted(results, key=lambda r: (str(r.config["settings"]), r.config["seed"])):
+        row = {"seed": r.config["seed"], **r.config["settings"]}
         if r.error is not None:
             row["error"] = f"{type(r.error).__name__}: {str(r.error).splitlines()[0]}"
         else:
             row.update({k: r.metrics.get(k) for k in METRICS})
             row["run_dir"] = r.checkpoint.path if r.checkpoint else ""
         rows.append(row)
-    rows.sort(
-        key=lambda d: (str(sorted((k, str(v)) for k, v in d.items() if k != "seed")), d["seed"])
-    )
     _write_table(rows, storage / "results.csv")
     print(f"sweep directory: {storage}")
     return 1 if any("error" in r for r in rows) else 0
