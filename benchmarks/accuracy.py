@@ -59,7 +59,7 @@ HYBRID_COLS = [
 POSTURE = np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])
 TABLE2_ROW1 = np.array([10.0, 120.0, 35.0, 80.0, 0.0])
 SUBSTEPS = (1, 2, 4, 8, 16, 32, 64, 128, 256, 400)  # per 20 ms: h = 20 ms ... 0.05 ms
-METHODS = ("euler", "semi_implicit", "rk2", "rk4", "limex")
+METHODS = ("euler", "semi_implicit", "rk2", "rk4", "limex", "rk4_limex")
 DIVERGED_RAD_S = 1e3
 
 
@@ -322,7 +322,7 @@ def stability_map(params, quick):
     for p_i, q in enumerate(postures):
         M = dyn.mass_matrix(ch, q)[1:, 1:]
         lam = float(np.linalg.eigvals(np.linalg.solve(M, D)).real.max())
-        for method in ("euler", "rk2", "rk4", "semi_implicit", "limex"):
+        for method in ("euler", "rk2", "rk4", "semi_implicit", "limex", "rk4_limex"):
             opts = SimOptions(integrator=method, project_constraints=False)
             iopt, fopt, a, b = opts.packed
 
@@ -473,7 +473,7 @@ def plot(rows_a, rows_b, rows_c, stab, path_a, path_b, path_c, path_s):
         fig.savefig(path, dpi=110)
         plt.close(fig)
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    for method, marker in (("euler", "o"), ("rk2", "s"), ("rk4", "^")):
+    for method, marker in (("euler", "o"), ("rk2", "s"), ("rk4", "^"), ("rk4_limex", "v")):
         sel = [s for s in stab if s["method"] == method]
         ax.loglog(
             [s["h_theory_ms"] for s in sel], [s["h_stable_ms"] for s in sel], marker, label=method
@@ -488,6 +488,49 @@ def plot(rows_a, rows_b, rows_c, stab, path_a, path_b, path_c, path_s):
     fig.tight_layout()
     fig.savefig(path_s, dpi=110)
     plt.close(fig)
+
+
+RULE_ANGLE_RAD = 1e-3
+RULE_SWITCH_TIME_S = 1e-3
+
+
+def rule_choice(rows_b, rows_c):
+    """The accuracy rule: the setting with the fewest evaluations per simulated second (the
+    larger of the two scenes) whose link angles stay within 1e-3 rad and switch times within
+    1 ms of the references in both walking scenes (b) and (c); also every setting meeting it."""
+    key = ("method", "locate_events", "jdot", "substeps_per_20ms")
+
+    def ok(r):
+        return (
+            r["max_angle_err_rad"] <= RULE_ANGLE_RAD
+            and r["switch_time_err_s"] <= RULE_SWITCH_TIME_S
+        )
+
+    c_by = {tuple(r[k] for k in key): r for r in rows_c}
+    meeting = []
+    for rb in rows_b:
+        rc = c_by.get(tuple(rb[k] for k in key))
+        if rc is None or _is_reference(rb) or not (ok(rb) and ok(rc)):
+            continue
+        meeting.append(
+            {
+                **{k: rb[k] for k in key},
+                "h_ms": rb["h_ms"],
+                "err_b_rad": rb["max_angle_err_rad"],
+                "err_c_rad": rc["max_angle_err_rad"],
+                "switch_err_b_s": rb["switch_time_err_s"],
+                "switch_err_c_s": rc["switch_time_err_s"],
+                "evals_per_sim_s": max(rb["evals_per_sim_s"], rc["evals_per_sim_s"]),
+            }
+        )
+    meeting.sort(key=lambda r: r["evals_per_sim_s"])
+    # the cheapest setting of each method (the rule's choice is the first)
+    firsts, seen = [], set()
+    for r in meeting:
+        if (r["method"], r["locate_events"], r["jdot"]) not in seen:
+            seen.add((r["method"], r["locate_events"], r["jdot"]))
+            firsts.append(r)
+    return firsts
 
 
 def _md(rows, cols):
@@ -536,6 +579,7 @@ def main(argv=None) -> int:
         args.out / "work_precision_c.png",
         args.out / "stability_map.png",
     )
+    results["rule"] = rule_choice(results["scene_b"], results["scene_c"])
     (args.out / "accuracy.json").write_text(json.dumps(results, indent=1) + "\n")
     md = (
         "## scene (a)\n"
@@ -554,6 +598,21 @@ def main(argv=None) -> int:
         + _md(results["scene_b"], HYBRID_COLS)
         + "\n## scene (c)\n"
         + _md(results["scene_c"], HYBRID_COLS)
+        + "\n## the accuracy rule: cheapest setting of each method meeting it in (b) and (c)\n"
+        + _md(
+            results["rule"],
+            [
+                "method",
+                "locate_events",
+                "jdot",
+                "h_ms",
+                "err_b_rad",
+                "err_c_rad",
+                "switch_err_b_s",
+                "switch_err_c_s",
+                "evals_per_sim_s",
+            ],
+        )
         + "\n## stability\n"
         + _md(
             results["stability"],

@@ -12,6 +12,14 @@ extrapolation, ``y1 = 2 Phi_{h/2}(Phi_{h/2}(y0)) - Phi_h(y0)`` (the first member
 Deuflhard's linearly implicit extrapolation family, LIMEX). Its amplification factor for
 ``y' = z y / h`` is ``2 / (1 - z/2)^2 - 1 / (1 - z)``, which goes to 0 as z -> -inf: L-stable.
 
+RK4_LIMEX switches between the two by stiffness, step by step: the friction is stiff only
+while a point contact slips slowly (its rate K f_n / eps at zero slip falls as (1 - s^2)^(3/2)
+with the regularised slip sign s), and the joint damping is within RK4's stability at the
+steps used. A step whose start or stage states show a slow slip, or a slip reversal, is taken
+by LIMEX instead (:func:`friction_is_stiff`); every other step is RK4, fourth order. The choice
+is made from the step's own states, so it is deterministic and the same in batched and single
+runs.
+
 ``STABILITY_CONSTANT`` is the real-axis stability limit ``h lambda`` of each method for the
 linear damping mode ``qdd = -lambda qd``: 2 for explicit Euler and RK2, about 2.785 for RK4,
 unbounded for the semi-implicit method and LIMEX (their damping update is unconditionally
@@ -39,12 +47,19 @@ class Integrator(IntEnum):
     LIMEX = 4
     """Linearly implicit Euler (joint damping and contact friction implicit) with one
     Richardson extrapolation: second order, L-stable, with an error estimate (see module)."""
+    RK4_LIMEX = 5
+    """Stiffness switching: RK4, except that a step whose point contact slips through the
+    friction's stiff band near zero slip is taken by LIMEX (see :func:`friction_is_stiff`)."""
 
 
 _TABLEAUS: dict[Integrator, tuple[list[list[float]], list[float]]] = {
     Integrator.EULER: ([[0.0]], [1.0]),
     Integrator.SEMI_IMPLICIT: ([[0.0]], [1.0]),  # unused: handled by its own update rule
     Integrator.LIMEX: ([[0.0]], [1.0]),  # unused: handled by its own update rule
+    Integrator.RK4_LIMEX: (  # RK4's, used on the non-stiff steps
+        [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+        [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
+    ),
     Integrator.RK2: ([[0.0, 0.0], [0.5, 0.0]], [0.0, 1.0]),
     Integrator.RK4: (
         [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
@@ -61,6 +76,7 @@ ORDER: dict[Integrator, int] = {
     Integrator.RK2: 2,
     Integrator.RK4: 4,
     Integrator.LIMEX: 2,
+    Integrator.RK4_LIMEX: 4,
 }
 """Global order of accuracy of each method."""
 
@@ -70,6 +86,7 @@ STABILITY_CONSTANT: dict[Integrator, float] = {
     Integrator.RK2: 2.0,
     Integrator.RK4: 2.785293563405282,
     Integrator.LIMEX: float("inf"),
+    Integrator.RK4_LIMEX: 2.785293563405282,
 }
 """Largest stable h * lambda on the negative real axis (lambda: eigenvalue of M^-1 D)."""
 
@@ -79,8 +96,26 @@ EVALS_PER_STEP: dict[Integrator, int] = {
     Integrator.RK2: 2,
     Integrator.RK4: 4,
     Integrator.LIMEX: 3,
+    Integrator.RK4_LIMEX: 4,
 }
 """Constrained dynamics evaluations per integration step."""
+
+
+FRICTION_RATE_BOUND = 1.0e5
+"""Bound [1/s] on the point contact's friction rate at zero slip, K f_n / eps times the
+tangential inverse mass of the constrained chain (6.5e4 measured at the full-cycle scene's
+slip reversal, benchmarks.accuracy). Away from zero slip the rate falls as (1 - s^2)^(3/2),
+s being the regularised slip sign."""
+
+SWITCH_H_LAMBDA = 0.5
+"""RK4_LIMEX takes a step by LIMEX when h * FRICTION_RATE_BOUND * (1 - s^2)^(3/2) exceeds this
+at any of RK4's stage states (or when the slip changes sign among them): a fifth of RK4's
+stability limit, so that the explicit steps are also accurate in the friction's fast mode."""
+
+
+def friction_is_stiff(slip_sign: float, h: float) -> bool:
+    """Whether RK4_LIMEX treats a step of h [s] at regularised slip sign s as stiff."""
+    return h * FRICTION_RATE_BOUND * (1.0 - slip_sign * slip_sign) ** 1.5 > SWITCH_H_LAMBDA
 
 
 def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:
@@ -94,7 +129,8 @@ def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:
 
 
 def parse_integrator(value: str | int | Integrator) -> Integrator:
-    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``).
+    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``,
+    ``"rk4_limex"``).
 
     An integer code is accepted too.
     """

@@ -23,7 +23,10 @@ import numba
 import numpy as np
 from numba import njit
 
+from .contact import nb_slip_sign
 from .hybrid import (
+    CONTACT_COL,
+    FC_SLIP,
     FO_POS_TOL,
     FO_SLIP_EPS,
     FO_TIME_TOL,
@@ -52,7 +55,14 @@ from .hybrid import (
     nb_renumber,
     nb_solve_mode_w,
 )
-from .integrators import EVALS_PER_STEP, Integrator, parse_integrator, tableau
+from .integrators import (
+    EVALS_PER_STEP,
+    FRICTION_RATE_BOUND,
+    SWITCH_H_LAMBDA,
+    Integrator,
+    parse_integrator,
+    tableau,
+)
 from .kinematics import KEYPOINT_NAMES, nb_keypoints
 from .model import N_ACTUATED, N_LINKS, BipedParams
 from .modes import FORCE_EVENTS, MODE_TABLE, N_GUARDS, EventCode, Mode, packed_mode_table
@@ -73,6 +83,7 @@ FORCE_EVENT_FLAGS = tuple(int(EventCode(k) in FORCE_EVENTS) for k in range(N_GUA
 N_STAGES = tuple(EVALS_PER_STEP[Integrator(m)] for m in range(len(Integrator)))
 SEMI_IMPLICIT = int(Integrator.SEMI_IMPLICIT)
 LIMEX = int(Integrator.LIMEX)
+RK4_LIMEX = int(Integrator.RK4_LIMEX)
 EVENT_PRIORITY = (5, 2, 3, 4, 1, 6, 7, 8)
 """Order in which simultaneous out-of-model guards are reported: geometry before forces."""
 
@@ -92,8 +103,9 @@ class SimOptions:
     """Numerical and modelling options of the simulator (see README, Model).
 
     Attributes:
-        integrator: ``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"`` or ``"limex"``
-            (linearly implicit extrapolation, L-stable, friction implicit; module integrators).
+        integrator: ``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``
+            (linearly implicit extrapolation, L-stable, friction implicit) or ``"rk4_limex"``
+            (RK4, with LIMEX on the steps where the friction is stiff); module integrators.
         substeps: integration steps per control period (>= 1).
         impact: ``"paper"`` (all joint velocities zero at 2->3 and 3->4) or ``"plastic"``.
         locate_events: locate guard crossings inside a substep (else switch at the sample).
@@ -311,8 +323,45 @@ def nb_make_scratch():
         np.empty(N_GUARDS),  # guards after a step
         np.zeros(6),  # tau6
         np.zeros(N_FORCES),  # forces scratch
-        np.zeros(6),  # qdd at the current start state (first RK stage, reused)
+        np.zeros(7),  # qdd at the current start state (first RK stage, reused), slip speed
     )
+
+
+@njit(cache=True)
+def _friction_stiff(slip_sign, h):
+    """RK4_LIMEX's test (integrators.friction_is_stiff): is the friction stiff for a step h?"""
+    u = 1.0 - slip_sign * slip_sign
+    return h * FRICTION_RATE_BOUND * u * np.sqrt(u) > SWITCH_H_LAMBDA
+
+
+@njit(cache=True)
+def _limex_step(ch, sc, mode, q, qd, tau6, h, fd, eps, W, S, mr):
+    """One LIMEX step of h into S[S_Q1], S[S_QD1].
+
+    y_a is one linearly implicit Euler step of h, y_b two of h / 2, and y1 = 2 y_b - y_a.
+    """
+    q1 = S[S_Q1]
+    qd1 = S[S_QD1]
+    qdd = W[W_QDD]
+    qa = S[S_KQ][0]
+    va = S[S_KV][0]
+    qs = S[S_QS]
+    vs = S[S_VS]
+    nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h, fd, eps, W, mr, True)
+    for j in range(6):
+        va[j] = qd[j] + h * qdd[j]
+        qa[j] = q[j] + h * va[j]
+    h2 = 0.5 * h
+    nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h2, 0.5 * fd, eps, W, mr, True)
+    for j in range(6):
+        vs[j] = qd[j] + h2 * qdd[j]
+        qs[j] = q[j] + h2 * vs[j]
+    nb_solve_mode_w(ch, sc, mode, qs, vs, tau6, h2, 0.5 * fd, eps, W, mr, True)
+    for j in range(6):
+        qd1[j] = vs[j] + h2 * qdd[j]
+        q1[j] = qs[j] + h2 * qd1[j]
+        qd1[j] = 2.0 * qd1[j] - va[j]
+        q1[j] = 2.0 * q1[j] - qa[j]
 
 
 @njit(cache=True)
@@ -334,34 +383,23 @@ def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=
             qd1[j] = qd[j] + h * qdd[j]
             q1[j] = q[j] + h * qd1[j]
     elif method == LIMEX:
-        # y_a: one linearly implicit Euler step of h; y_b: two of h / 2; y1 = 2 y_b - y_a
-        mr = iopt[IO_MASS_RNEA] != 0
-        qa = S[S_KQ][0]
-        va = S[S_KV][0]
-        qs = S[S_QS]
-        vs = S[S_VS]
-        nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h, fd, eps, W, mr, True)
-        for j in range(6):
-            va[j] = qd[j] + h * qdd[j]
-            qa[j] = q[j] + h * va[j]
-        h2 = 0.5 * h
-        nb_solve_mode_w(ch, sc, mode, q, qd, tau6, h2, 0.5 * fd, eps, W, mr, True)
-        for j in range(6):
-            vs[j] = qd[j] + h2 * qdd[j]
-            qs[j] = q[j] + h2 * vs[j]
-        nb_solve_mode_w(ch, sc, mode, qs, vs, tau6, h2, 0.5 * fd, eps, W, mr, True)
-        for j in range(6):
-            qd1[j] = vs[j] + h2 * qdd[j]
-            q1[j] = qs[j] + h2 * qd1[j]
-            qd1[j] = 2.0 * qd1[j] - va[j]
-            q1[j] = 2.0 * q1[j] - qa[j]
+        _limex_step(ch, sc, mode, q, qd, tau6, h, fd, eps, W, S, iopt[IO_MASS_RNEA] != 0)
     else:
         ns = N_STAGES[method]
         kq = S[S_KQ]
         kv = S[S_KV]
         qs = S[S_QS]
         vs = S[S_VS]
+        # stiffness switching: watch the slip sign at each stage state (start included)
+        switching = method == RK4_LIMEX and CONTACT_COL[mode] >= 0
+        stiff = False
+        s_first = 0.0
+        if switching and use_k1:
+            s_first = nb_slip_sign(S[S_K1][6], eps)
+            stiff = _friction_stiff(s_first, h)
         for st in range(ns):
+            if stiff:
+                break
             for j in range(6):
                 qs[j] = q[j]
                 vs[j] = qd[j]
@@ -376,18 +414,29 @@ def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=
                     kq[0, j] = qd[j]
                     kv[0, j] = S[S_K1][j]
                 continue
-            nb_solve_mode_w(ch, sc, mode, qs, vs, tau6, 0.0, fd, eps, W, iopt[IO_MASS_RNEA] != 0)
+            _, sg, _ = nb_solve_mode_w(
+                ch, sc, mode, qs, vs, tau6, 0.0, fd, eps, W, iopt[IO_MASS_RNEA] != 0
+            )
+            if switching:
+                if st == 0:
+                    s_first = sg
+                if _friction_stiff(sg, h) or sg * s_first < 0.0:
+                    stiff = True
+                    break
             for j in range(6):
                 kq[st, j] = vs[j]
                 kv[st, j] = qdd[j]
-        for j in range(6):
-            q1[j] = q[j]
-            qd1[j] = qd[j]
-        for st in range(ns):
-            c = h * b[st]
+        if stiff:
+            _limex_step(ch, sc, mode, q, qd, tau6, h, fd, eps, W, S, iopt[IO_MASS_RNEA] != 0)
+        else:
             for j in range(6):
-                q1[j] += c * kq[st, j]
-                qd1[j] += c * kv[st, j]
+                q1[j] = q[j]
+                qd1[j] = qd[j]
+            for st in range(ns):
+                c = h * b[st]
+                for j in range(6):
+                    q1[j] += c * kq[st, j]
+                    qd1[j] += c * kv[st, j]
     if iopt[IO_PROJECT] != 0:
         nb_project_w(ch, sc, mode, q1, qd1, W)
     elif _RF[mode] == 0:
@@ -541,6 +590,7 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
             nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, 0.0, W, fo, g)
             for j in range(6):
                 k1[j] = W[W_QDD][j]
+            k1[6] = fo[FC_SLIP]
             for kk in EVENT_PRIORITY:
                 if _fired(g, kk, ignored):
                     k = kk
@@ -573,6 +623,7 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
                     q[j] = q1[j]
                     qd[j] = qd1[j]
                     k1[j] = W[W_QDD][j]
+                k1[6] = fo[FC_SLIP]
                 for kk in range(N_GUARDS):
                     g[kk] = g1[kk]
                 t += hh

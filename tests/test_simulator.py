@@ -39,7 +39,7 @@ def _start(mode):
     return SimState(0.0, mode, 0, q, qd)
 
 
-@pytest.mark.parametrize("integrator", ["rk4", "limex"])
+@pytest.mark.parametrize("integrator", ["rk4", "limex", "rk4_limex"])
 @pytest.mark.parametrize("mode", [1, 2])
 def test_energy_balance_with_damping(params, mode, integrator):
     """tau = 0: E(t) + dissipated work = E(0), work = int qd^T D qd dt (Simpson's rule).
@@ -59,7 +59,7 @@ def test_energy_balance_with_damping(params, mode, integrator):
     work = h / 3 * (p[0] + p[-1] + 4 * p[1:-1:2].sum() + 2 * p[2:-1:2].sum())
     e1 = sum(dyn.energy(ch, st.q, st.qd))
     assert work > 0.1  # [J] the damping really dissipates something here
-    rtol = RTOL_ENERGY if integrator == "rk4" else 1e-4
+    rtol = 1e-4 if integrator == "limex" else RTOL_ENERGY
     assert abs(e1 + work - e0) <= rtol * abs(e0)
 
 
@@ -82,6 +82,7 @@ def test_energy_conserved_without_damping(mode):
         ("rk2", (32, 64, 128), 4.0),
         ("rk4", (16, 32, 64), 16.0),
         ("limex", (16, 32, 64), 4.0),
+        ("rk4_limex", (16, 32, 64), 16.0),
     ],
 )
 def test_convergence_order(params, integrator, ns, expected):
@@ -119,6 +120,8 @@ def _diverges(params, integrator, h, t_end=1.0):
         ("semi_implicit", 0.040, False),
         ("limex", 0.020, False),
         ("limex", 0.040, False),
+        ("rk4_limex", 0.012, True),  # the switch is for the friction; damping is RK4's
+        ("rk4_limex", 0.008, False),
     ],
 )
 def test_stability_region_model1_table2(params, integrator, h, diverges):
@@ -397,3 +400,24 @@ def test_limex_accurate_through_a_stiff_contact_at_20ms(params):
     assert np.abs(got - ref).max() <= 1e-3 and np.abs(sw - sw_ref).max() <= 1e-3
     got, sw = _sliding_heel_run(params, SimOptions(integrator="rk4", substeps=1))
     assert np.abs(got - ref).max() > 1e-3 and np.abs(sw - sw_ref).max() > 1e-3
+
+
+def test_rk4_limex_switches_to_limex_only_where_the_friction_is_stiff(params):
+    """On the sticking heel at 5 ms, RK4 is bounded but wrong and LIMEX right; the switching
+    method takes the stiff steps by LIMEX (its result then differs from RK4's) and meets the
+    accuracy rule; in model 1 (no point contact) it is RK4, bit for bit."""
+    from biped_constraint_env.integrators import friction_is_stiff
+
+    assert friction_is_stiff(0.0, 0.005) and not friction_is_stiff(0.0, 1e-6)
+    assert not friction_is_stiff(0.99999, 0.005)  # sliding at ~220 eps
+    ref, sw_ref = _sliding_heel_run(params, SimOptions(integrator="rk4", substeps=400))
+    got, sw = _sliding_heel_run(params, SimOptions(integrator="rk4_limex", substeps=4))
+    rk4, sw4 = _sliding_heel_run(params, SimOptions(integrator="rk4", substeps=4))
+    assert len(sw) == len(sw_ref) == 2
+    assert np.abs(got - ref).max() <= 1e-3 and np.abs(sw - sw_ref).max() <= 1e-3
+    assert np.abs(got - ref).max() < 0.5 * np.abs(rk4 - ref).max()
+    st = SimState(0.0, 1, 0, STANCE_POSTURE, np.zeros(6))
+    a = _integrate(params, st, TABLE2_NM[0], 0.005, 20, SimOptions(integrator="rk4"))
+    b = _integrate(params, st, TABLE2_NM[0], 0.005, 20, SimOptions(integrator="rk4_limex"))
+    np.testing.assert_array_equal(a.q, b.q)
+    np.testing.assert_array_equal(a.qd, b.qd)

@@ -110,6 +110,14 @@ def test_limex_same_in_batched_and_single():
     assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
 
 
+def test_rk4_limex_same_in_batched_and_single():
+    """The stiffness-switching integrator with explicit substeps: batched = single, bit for bit."""
+    kw = dict(num_envs=3, integrator="rk4_limex", substeps=1)
+    ob, rb, tb = _run_kw("vector_entry_point", kw, steps=150)
+    os_, rs, ts = _run_kw("sync", kw, steps=150)
+    assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
+
+
 def _run_kw(mode, kw, steps=60, seed=3):
     ve = gym.make_vec(ENV_ID, vectorization_mode=mode, **kw)
     obs, _ = ve.reset(seed=seed)
