@@ -106,8 +106,8 @@ def main(argv=None) -> int:
         f"{replay:.1f} us (ratio {replay / walker:.3f}, target <= 0.1)"
     )
     for label, kw in (
-        ("default: walking task, 5 ms, RK4 x 4", {}),
-        ("task='paper', preset='default': 20 ms, RK4 x 16", {"task": "paper", "preset": "default"}),
+        ("default: walking task, 5 ms, RK4_LIMEX x 2", {}),
+        ("task='paper', preset='default': 20 ms, RK4_LIMEX x 8", {"task": "paper", "preset": "default"}),
         ("task='paper', preset='fast': 20 ms, RK2 x 4", {"task": "paper", "preset": "fast"}),
     ):
         ours = per_step_us(env_id, args.steps, **kw)

@@ -125,8 +125,8 @@ class SimOptions:
             torque at the switch). Off: the torque row of each model holds to the period's end.
     """
 
-    integrator: str = "rk4"
-    substeps: int = 16
+    integrator: str = "rk4_limex"
+    substeps: int = 8
     impact: str = "plastic"
     locate_events: bool = True
     jdot: str = "exact"
@@ -193,14 +193,14 @@ class SimOptions:
 
 
 DEFAULT_OPTIONS = SimOptions()
-"""Defaults (env v1): RK4 x 16 substeps per 20 ms (1.25 ms), located events, exact J-dot,
+"""Defaults: RK4_LIMEX x 8 substeps per 20 ms (2.5 ms), located events, exact J-dot,
 strict checks, plastic impacts, and the heel/toe split of the flat stance foot with the foot's
 weight included (the exact ground reaction, so that F_L <= 0 agrees with the model-2
 dynamics). The integrator and substeps are the cheapest point of the accuracy study meeting
 <= 1e-3 rad and <= 1 ms switch-time error over both walking scenes (README, Speed and accuracy)."""
 
 FAST_OPTIONS = DEFAULT_OPTIONS.replace(integrator="rk2", substeps=4)
-"""RK2 x 4 substeps per 20 ms (5 ms, inside RK2's limit 2/lambda ~ 7.7 ms): about 6x cheaper;
+"""RK2 x 4 substeps per 20 ms (5 ms, inside RK2's limit 2/lambda ~ 7.7 ms): about 3x cheaper;
 7e-4 rad over the two-impact scene but 0.03 rad over the full-cycle scene (env v0)."""
 
 PAPER_OPTIONS = SimOptions(

@@ -20,7 +20,7 @@ PRESETS: dict[str, SimOptions] = {
     "fast": FAST_OPTIONS,
     "paper": PAPER_OPTIONS,
 }
-"""Fidelity presets: the accurate defaults (RK4 x 16 per 20 ms), the ~6x cheaper "fast"
+"""Fidelity presets: the accurate defaults (RK4_LIMEX x 8 per 20 ms), the ~3x cheaper "fast"
 (RK2 x 4; fails the accuracy rule over a walking cycle) and the paper's own numerical choices."""
 
 TASKS: dict[str, dict[str, Any]] = {
@@ -51,8 +51,8 @@ def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOpt
     """The simulator options of a preset with per-option overrides (None = keep).
 
     A preset's ``substeps`` are per the paper's 20 ms period: for another control period dt
-    they are scaled so that the substep is never longer than the preset's (RK4 x 16 per 20 ms
-    is RK4 x 4 per 5 ms, 1.25 ms substeps). An explicit ``substeps`` is per period, as given.
+    they are scaled so that the substep is never longer than the preset's (x 8 per 20 ms is
+    x 2 per 5 ms, 2.5 ms substeps). An explicit ``substeps`` is per period, as given.
     """
     if preset not in PRESETS:
         raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")

@@ -41,7 +41,7 @@ def test_paper_task_and_overrides():
     env = gym.make("ConstrainedBiped-v0", preset="fast").unwrapped
     assert (env.options.integrator, env.options.substeps, env.dt) == ("rk2", 1, 0.005)
     # a preset keeps its substep length at any control period; explicit substeps are per period
-    assert gym.make("ConstrainedBiped-v0").unwrapped.options.substeps == 4  # 1.25 ms at 5 ms
+    assert gym.make("ConstrainedBiped-v0").unwrapped.options.substeps == 2  # 2.5 ms at 5 ms
     assert gym.make("ConstrainedBiped-v0", dt=0.007).unwrapped.options.substeps == 6
     assert gym.make("ConstrainedBiped-v0", substeps=3).unwrapped.options.substeps == 3
     assert set(TASKS) == {"walk", "paper"}
