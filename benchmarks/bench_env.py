@@ -107,7 +107,10 @@ def main(argv=None) -> int:
     )
     for label, kw in (
         ("default: walking task, 5 ms, RK4_LIMEX x 2", {}),
-        ("task='paper', preset='default': 20 ms, RK4_LIMEX x 8", {"task": "paper", "preset": "default"}),
+        (
+            "task='paper', preset='default': 20 ms, RK4_LIMEX x 8",
+            {"task": "paper", "preset": "default"},
+        ),
         ("task='paper', preset='fast': 20 ms, RK2 x 4", {"task": "paper", "preset": "fast"}),
     ):
         ours = per_step_us(env_id, args.steps, **kw)

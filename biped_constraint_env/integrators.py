@@ -129,10 +129,9 @@ def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:
 
 
 def parse_integrator(value: str | int | Integrator) -> Integrator:
-    """Integrator from a name (``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``,
-    ``"rk4_limex"``).
+    """Integrator from its name or integer code.
 
-    An integer code is accepted too.
+    Names: ``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``, ``"rk4_limex"``.
     """
     if isinstance(value, str):
         try:
