@@ -22,7 +22,7 @@ def test_one_id_with_string_entry_points():
 def test_defaults_are_the_accurate_physics_and_the_walking_task():
     env = gym.make("ConstrainedBiped-v0").unwrapped
     assert env.options == biped_constraint_env.DEFAULT_OPTIONS.replace(
-        stop_at_switch=True, substeps=4
+        stop_at_switch=True, substeps=2
     )
     assert (env.dt, env.start, env.task) == (0.005, "midstride", "walk")
     _, info = env.reset(seed=0)
@@ -42,8 +42,8 @@ def test_paper_task_and_overrides():
     assert (env.options.integrator, env.options.substeps, env.dt) == ("rk2", 1, 0.005)
     # a preset keeps its substep length at any control period; explicit substeps are per period
     assert gym.make("ConstrainedBiped-v0").unwrapped.options.substeps == 2  # 2.5 ms at 5 ms
-    assert gym.make("ConstrainedBiped-v0", dt=0.007).unwrapped.options.substeps == 6
-    assert gym.make("ConstrainedBiped-v0", substeps=3).unwrapped.options.substeps == 3
+    assert gym.make("ConstrainedBiped-v0", dt=0.007).unwrapped.options.substeps == 3  # <= 2.5 ms
+    assert gym.make("ConstrainedBiped-v0", substeps=5).unwrapped.options.substeps == 5
     assert set(TASKS) == {"walk", "paper"}
 
 
