@@ -31,6 +31,7 @@ from __future__ import annotations
 from enum import IntEnum
 
 import numpy as np
+from numba import njit
 
 
 class Integrator(IntEnum):
@@ -113,9 +114,14 @@ at any of RK4's stage states (or when the slip changes sign among them): a fifth
 stability limit, so that the explicit steps are also accurate in the friction's fast mode."""
 
 
+@njit(cache=True)
 def friction_is_stiff(slip_sign: float, h: float) -> bool:
-    """Whether RK4_LIMEX treats a step of h [s] at regularised slip sign s as stiff."""
-    return h * FRICTION_RATE_BOUND * (1.0 - slip_sign * slip_sign) ** 1.5 > SWITCH_H_LAMBDA
+    """Whether RK4_LIMEX treats a step of h [s] at regularised slip sign s as stiff.
+
+    Compiled: the stepping loop calls it at every stage state of a point-contact step.
+    """
+    u = 1.0 - slip_sign * slip_sign
+    return h * FRICTION_RATE_BOUND * u * np.sqrt(u) > SWITCH_H_LAMBDA
 
 
 def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:

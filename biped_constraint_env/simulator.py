@@ -57,9 +57,8 @@ from .hybrid import (
 )
 from .integrators import (
     EVALS_PER_STEP,
-    FRICTION_RATE_BOUND,
-    SWITCH_H_LAMBDA,
     Integrator,
+    friction_is_stiff,
     parse_integrator,
     tableau,
 )
@@ -328,13 +327,6 @@ def nb_make_scratch():
 
 
 @njit(cache=True)
-def _friction_stiff(slip_sign, h):
-    """RK4_LIMEX's test (integrators.friction_is_stiff): is the friction stiff for a step h?"""
-    u = 1.0 - slip_sign * slip_sign
-    return h * FRICTION_RATE_BOUND * u * np.sqrt(u) > SWITCH_H_LAMBDA
-
-
-@njit(cache=True)
 def _limex_step(ch, sc, mode, q, qd, tau6, h, fd, eps, W, S, mr):
     """One LIMEX step of h into S[S_Q1], S[S_QD1].
 
@@ -396,7 +388,7 @@ def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=
         s_first = 0.0
         if switching and use_k1:
             s_first = nb_slip_sign(S[S_K1][6], eps)
-            stiff = _friction_stiff(s_first, h)
+            stiff = friction_is_stiff(s_first, h)
         for st in range(ns):
             if stiff:
                 break
@@ -420,7 +412,7 @@ def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=
             if switching:
                 if st == 0:
                     s_first = sg
-                if _friction_stiff(sg, h) or sg * s_first < 0.0:
+                if friction_is_stiff(sg, h) or sg * s_first < 0.0:
                     stiff = True
                     break
             for j in range(6):
