@@ -16,26 +16,17 @@ from gymnasium import spaces
 from .actions import TORQUE_LIMIT_NM, check_action_settings, validate_action
 from .model import N_ACTUATED, BipedParams, paper_biped
 from .modes import EventCode
-from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe, observation_space
+from .observation import observation_space
+from .period import EnvBuffers
 from .rewards import (
     REWARD_TERMS,
     TERMINATION_FALL,
     TERMINATION_NON_FINITE,
     check_fall_height,
-    cycle_position,
-    fallen,
-    reward_terms,
+    reward_config,
     reward_weights,
 )
-from .simulator import (
-    STATUS_NONFINITE,
-    STATUS_TERMINATED,
-    SimArrays,
-    SimState,
-    advance,
-    evaluate,
-    keypoints,
-)
+from .simulator import STATUS_NONFINITE, STATUS_TERMINATED, SimState, evaluate, keypoints
 from .starts import (
     NOMINAL_POSTURE_RAD,
     RESET_NOISE_SCALE_RAD,
@@ -252,10 +243,14 @@ class ConstrainedBipedEnv(gym.Env):
             -self.torque_limit_nm, self.torque_limit_nm, (N_ACTUATED,), np.float32
         )
         self.observation_space = observation_space()
-        self._sim = SimArrays(1)
-        self._obs = np.zeros((1, OBS_DIM))
-        self._hip = np.zeros((1, 4))
-        self._tau_table = np.zeros((1, 4, N_ACTUATED))
+        self._buf = EnvBuffers(
+            1,
+            self.params,
+            self.options,
+            self.dt,
+            reward_config(self.weights, self.torque_limit_nm, self.fall_hip_height_m),
+        )
+        self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
 
     # ---------------------------------------------------------------- state access
@@ -292,47 +287,29 @@ class ConstrainedBipedEnv(gym.Env):
     def step(self, action):
         """Apply the torques for one control period (see the class docstring)."""
         tau = validate_action(action, self.torque_limit_nm, self.out_of_range)
-        sim = self._sim
+        buf = self._buf
+        sim = buf.sim
         if sim.status[0] != 0:
             raise RuntimeError("step() called after the episode ended; call reset()")
-        mode0, _, steps0, _ = sim.ist[0].tolist()
-        hip_y0 = self._hip[0, 0].item()
-        self._tau_table[0] = tau
-        advance(self.params, sim, self._tau_table, self.dt, self.options)
-        self._observe()
-        status = sim.status[0].item()
+        buf.tau[0] = tau
+        buf.period()
+        status = sim.status[0]
         events = sim.events_of(0) if sim.n_events[0] else ()
         reason = None
         if status == STATUS_TERMINATED:
             reason = next(e.code.name.lower() for e in events if e.terminal)
         elif status == STATUS_NONFINITE:
             reason = TERMINATION_NON_FINITE
-        elif fallen(self._hip[0, 1].item(), self.fall_hip_height_m):
+        elif buf.fell[0]:
             reason = TERMINATION_FALL
-        mode1, _, steps1, _ = sim.ist[0].tolist()
-        parts = reward_terms(
-            self._hip[0, 0].item() - hip_y0,
-            self.dt,
-            cycle_position(mode1, steps1) - cycle_position(mode0, steps0),
-            steps1 - steps0,
-            reason is None,
-            tau,
-            self.torque_limit_nm,
-            *self.weights,
-        )
-        terms = dict(zip(REWARD_TERMS, parts, strict=True))
-        reward = sum(parts)
-        info = self._info(events, terms, reason)
+        *parts, reward = buf.rew[0].tolist()
+        info = self._info(events, dict(zip(REWARD_TERMS, parts, strict=True)), reason)
         if self.render_mode == "human":
             self.render()
-        return self._obs[0].copy(), reward, reason is not None, False, info
+        return buf.obs[0].copy(), reward, reason is not None, False, info
 
     def _observe(self) -> None:
-        chs, scs = self.params.packed
-        s = self._sim
-        nb_observe(
-            chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW, OBS_HIGH
-        )
+        self._buf.observe()
 
     def _info(self, events, terms, reason) -> dict[str, Any]:
         mode, side, steps, _ = self._sim.ist[0].tolist()

@@ -66,32 +66,43 @@ OBS_LOW, OBS_HIGH = _obs_bounds()
 
 
 @njit(cache=True)
+def nb_observe_row(chs, scs, q, qd, ist, fst, forces, obs, hip, low, high, K):
+    """Fill one environment's obs (24,), clipped to [low, high], and hip (4: y, z, vy, vz).
+
+    K: (6, NK) kinematics workspace.
+    """
+    side = ist[1]
+    mode = ist[0]
+    hy, hz, hvy, hvz = nb_hip_kinematics(chs[side], q, qd, fst[1], K)
+    hip[0] = hy
+    hip[1] = hz
+    hip[2] = hvy
+    hip[3] = hvz
+    for j in range(6):
+        obs[j] = nb_wrap(q[j])  # angles, so wrapped to (-pi, pi]
+        obs[6 + j] = qd[j]
+    obs[12] = hy - fst[1]
+    obs[13] = hz
+    obs[14] = hvy
+    obs[15] = hvz
+    obs[16] = side
+    for m in range(4):
+        obs[17 + m] = 1.0 if mode == m + 1 else 0.0
+    obs[21] = forces[0]
+    obs[22] = forces[1]
+    obs[23] = forces[2]
+    for j in range(obs.shape[0]):
+        obs[j] = min(max(obs[j], low[j]), high[j])
+
+
+@njit(cache=True)
 def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
     """Fill OBS (n, 24), clipped to [low, high], and HIP (n, 4: hip y, z, vy, vz)."""
     K = np.empty((N_LINKS, NK))
     for i in range(Q.shape[0]):
-        side = IST[i, 1]
-        mode = IST[i, 0]
-        hy, hz, hvy, hvz = nb_hip_kinematics(chs[side], Q[i], QD[i], FST[i, 1], K)
-        HIP[i, 0] = hy
-        HIP[i, 1] = hz
-        HIP[i, 2] = hvy
-        HIP[i, 3] = hvz
-        for j in range(6):
-            OBS[i, j] = nb_wrap(Q[i, j])  # angles, so wrapped to (-pi, pi]
-            OBS[i, 6 + j] = QD[i, j]
-        OBS[i, 12] = hy - FST[i, 1]
-        OBS[i, 13] = hz
-        OBS[i, 14] = hvy
-        OBS[i, 15] = hvz
-        OBS[i, 16] = side
-        for m in range(4):
-            OBS[i, 17 + m] = 1.0 if mode == m + 1 else 0.0
-        OBS[i, 21] = FORCES[i, 0]
-        OBS[i, 22] = FORCES[i, 1]
-        OBS[i, 23] = FORCES[i, 2]
-        for j in range(OBS.shape[1]):
-            OBS[i, j] = min(max(OBS[i, j], low[j]), high[j])
+        nb_observe_row(
+            chs, scs, Q[i], QD[i], IST[i], FST[i], FORCES[i], OBS[i], HIP[i], low, high, K
+        )
 
 
 def observation_space() -> spaces.Box:

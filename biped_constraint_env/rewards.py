@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 TERMINATION_NON_FINITE = "non_finite"
 TERMINATION_FALL = "fall"
@@ -11,54 +12,56 @@ REWARD_TERMS = ("reward_forward", "reward_alive", "reward_switch", "reward_step"
 """Names of the reward terms in ``info`` (their sum is the reward)."""
 
 
-def fallen(hip_z, threshold_m: float | None):
-    """Whether the hip is below ``threshold_m`` [m] (never when the threshold is None)."""
-    if threshold_m is None:
-        return hip_z < -np.inf
-    return hip_z < threshold_m
+CFG_FORWARD, CFG_ALIVE, CFG_SWITCH, CFG_STEP, CFG_CTRL, CFG_LIMIT, CFG_FALL = range(7)
+"""Entries of :func:`reward_config`'s array."""
 
 
-def cycle_position(mode: np.ndarray, steps: np.ndarray) -> np.ndarray:
+def reward_config(
+    weights: tuple[float, ...], torque_limit_nm: float, fall_hip_height_m: float | None
+) -> np.ndarray:
+    """The reward settings as one array, for :func:`nb_reward_terms`.
+
+    The weights (REWARD_TERMS order), the torque bound [N m] and the fall height [m] (-inf:
+    off), indexed by the CFG_* constants.
+    """
+    fall = -np.inf if fall_hip_height_m is None else fall_hip_height_m
+    return np.array([*weights, torque_limit_nm, fall], dtype=np.float64)
+
+
+@njit(cache=True)
+def nb_fallen(hip_z: float, cfg: np.ndarray) -> bool:
+    """Whether the hip is below the fall height (never when it is off: -inf)."""
+    return hip_z < cfg[CFG_FALL]
+
+
+@njit(cache=True)
+def nb_cycle_position(mode: int, steps: int) -> int:
     """4 * steps + (mode - 1): increases by one at every forward model switch."""
     return 4 * steps + (mode - 1)
 
 
-def reward_terms(
-    progress_m,
-    dt: float,
-    switches,
-    steps,
-    alive,
-    tau: np.ndarray,
-    limit: float,
-    w_forward: float,
-    w_alive: float,
-    w_switch: float,
-    w_step: float,
-    w_ctrl: float,
-) -> tuple:
-    """The reward terms of one control period, in REWARD_TERMS order (see Rewards).
+@njit(cache=True)
+def nb_reward_terms(progress_m, dt, switches, steps, alive, tau, cfg, out):
+    """The reward terms of one control period, and their sum (see the env docstring, Rewards).
 
-    Works elementwise on one env (scalars, ``tau`` (5,)) or on n envs (arrays (n,), ``tau``
-    (n, 5)) with the same floating-point operations, so both environments agree bit for bit.
+    Writes the terms into ``out[:5]`` (REWARD_TERMS order) and their sum into ``out[5]``.
 
     Args:
         progress_m: hip progress [m]. dt: control period [s]. switches: forward model switches
             in the period. steps: walking steps completed in the period. alive: whether the
-            period did not end in a termination. tau: applied torques [N m]. limit: torque
-            bound [N m]. w_*: the weights.
+            period did not end in a termination. tau: (5,) applied torques [N m]. cfg:
+            :func:`reward_config`. out: (6,) output.
     """
-    if tau.ndim == 1:  # one env: plain floats; sequential sum, as numpy's for 5 elements
-        tau_sq = sum(x * x for x in tau.tolist())
-    else:
-        tau_sq = np.sum(tau * tau, axis=-1)
-    return (
-        w_forward * progress_m / dt,
-        w_alive * alive,
-        w_switch * switches,
-        w_step * steps,
-        -w_ctrl * tau_sq / (limit * limit),
-    )
+    tau_sq = 0.0
+    for j in range(tau.shape[0]):
+        tau_sq += tau[j] * tau[j]
+    limit = cfg[CFG_LIMIT]
+    out[0] = cfg[CFG_FORWARD] * progress_m / dt
+    out[1] = cfg[CFG_ALIVE] * (1.0 if alive else 0.0)
+    out[2] = cfg[CFG_SWITCH] * switches
+    out[3] = cfg[CFG_STEP] * steps
+    out[4] = -cfg[CFG_CTRL] * tau_sq / (limit * limit)
+    out[5] = out[0] + out[1] + out[2] + out[3] + out[4]
 
 
 def reward_weights(

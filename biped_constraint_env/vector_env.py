@@ -20,16 +20,9 @@ from gymnasium.vector.utils import batch_space
 from .actions import validate_actions
 from .env import ConstrainedBipedEnv
 from .model import N_ACTUATED
-from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe
-from .rewards import (
-    REWARD_TERMS,
-    TERMINATION_FALL,
-    TERMINATION_NON_FINITE,
-    cycle_position,
-    fallen,
-    reward_terms,
-)
-from .simulator import STATUS_NONFINITE, STATUS_TERMINATED, SimArrays, advance, evaluate
+from .period import EnvBuffers
+from .rewards import REWARD_TERMS, TERMINATION_FALL, TERMINATION_NON_FINITE, reward_config
+from .simulator import STATUS_NONFINITE, evaluate
 from .starts import check_start_state, sample_start, start_sampled, state_from_options
 from .tasks import MAX_EPISODE_STEPS
 
@@ -76,10 +69,15 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self.params = self._proto.params
         self.options = self._proto.options
         self.dt = self._proto.dt
-        self._sim = SimArrays(num_envs)
-        self._obs = np.zeros((num_envs, OBS_DIM))
-        self._hip = np.zeros((num_envs, 4))
-        self._tau = np.zeros((num_envs, 4, N_ACTUATED))
+        p = self._proto
+        self._buf = EnvBuffers(
+            num_envs,
+            self.params,
+            self.options,
+            self.dt,
+            reward_config(p.weights, p.torque_limit_nm, p.fall_hip_height_m),
+        )
+        self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._elapsed = np.zeros(num_envs, np.int64)
         self._autoreset = np.zeros(num_envs, bool)
         self._rngs: list[np.random.Generator] = [
@@ -134,32 +132,18 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         resetting = np.flatnonzero(self._autoreset)
         if resetting.size:
             self._reset_slots(resetting)
-        self._sim.status[resetting] = -1  # skipped by the batch step this period
-        hip0 = self._hip[:, 0].copy()
-        steps0 = self._sim.ist[:, 2].copy()
-        pos0 = cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2])
-        self._tau[:] = tau[:, None, :]
-        advance(self.params, self._sim, self._tau, self.dt, self.options)
-        self._sim.status[resetting] = 0
-        self._sim.n_events[resetting] = 0
-        self._observe()
-        status = self._sim.status
-        fell = fallen(self._hip[:, 1], p.fall_hip_height_m) & (status == 0)
-        terminated = (status == STATUS_TERMINATED) | (status == STATUS_NONFINITE) | fell
+        buf = self._buf
+        buf.sim.status[resetting] = -1  # not stepped this period; zero reward
+        buf.tau[:] = tau[:, None, :]
+        buf.period()
+        buf.sim.status[resetting] = 0
+        buf.sim.n_events[resetting] = 0
+        status = buf.sim.status
+        fell = buf.fell.astype(bool)
+        terminated = (status > 0) | fell
         self._fell = fell
-        parts = reward_terms(
-            self._hip[:, 0] - hip0,
-            self.dt,
-            cycle_position(self._sim.ist[:, 0], self._sim.ist[:, 2]) - pos0,
-            self._sim.ist[:, 2] - steps0,
-            ~terminated,
-            tau,
-            p.torque_limit_nm,
-            *p.weights,
-        )
-        for part in parts:
-            part[resetting] = 0.0
-        rewards = sum(parts)
+        parts = tuple(buf.rew[:, k].copy() for k in range(len(REWARD_TERMS)))
+        rewards = buf.rew[:, -1].copy()
         self._elapsed += 1
         self._elapsed[resetting] = 0
         truncated = np.zeros(self.num_envs, bool)
@@ -185,11 +169,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         return self._obs.copy(), rewards, terminated, truncated, infos
 
     def _observe(self) -> None:
-        chs, scs = self.params.packed
-        s = self._sim
-        nb_observe(
-            chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self._obs, self._hip, OBS_LOW, OBS_HIGH
-        )
+        self._buf.observe()
 
     def _infos(self, zeros: np.ndarray, terms) -> dict[str, Any]:
         s = self._sim

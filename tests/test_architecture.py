@@ -1,6 +1,6 @@
 """One direction of dependency: model -> kinematics -> dynamics -> contact -> modes -> hybrid
--> simulator -> (the env's parts: tasks, actions, starts, rewards, observation) -> env ->
-vector_env. Each module may import only modules of lower or equal rank."""
+-> simulator -> (the env's parts: tasks, actions, starts, rewards, observation) -> period (their
+compiled control period) -> env -> vector_env. Each module may import only modules of lower or equal rank."""
 
 import ast
 from pathlib import Path
@@ -26,6 +26,7 @@ LAYERS = [
     "starts",
     "rewards",
     "observation",
+    "period",
     "env",
     "vector_env",
     "__init__",

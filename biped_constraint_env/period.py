@@ -1,0 +1,150 @@
+"""The environments' control period as one compiled call: physics, observation and reward.
+
+:class:`~.env.ConstrainedBipedEnv` and :class:`~.vector_env.ConstrainedBipedVectorEnv` both
+step through :func:`nb_env_period` (the simulator's :func:`~.simulator.nb_advance_w`, then
+:func:`~.observation.nb_observe`, then :func:`~.rewards.nb_reward_terms`), so they agree bit for
+bit, and a single ``env.step`` enters compiled code once. The Python around it only validates
+the action and builds ``info``.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit
+
+from .hybrid import nb_make_work
+from .kinematics import NK
+from .model import N_ACTUATED, N_LINKS
+from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe, nb_observe_row
+from .rewards import nb_cycle_position, nb_fallen, nb_reward_terms
+from .simulator import (
+    PARALLEL_MIN_BATCH,
+    ST_MODE,
+    ST_STEPS,
+    STATUS_NONFINITE,
+    STATUS_OK,
+    STATUS_TERMINATED,
+    SimArrays,
+    nb_advance_w,
+    nb_make_scratch,
+)
+
+N_REWARD_OUT = 6
+"""Columns of the reward output: the five REWARD_TERMS, then their sum."""
+
+
+@njit(cache=True)
+def _period_range(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    REW, FELL, lo, hi,
+):  # fmt: skip
+    """:func:`nb_env_period` for rows lo..hi-1, one workspace."""
+    W = nb_make_work()
+    S = nb_make_scratch()
+    K = np.empty((N_LINKS, NK))
+    for i in range(lo, hi):
+        hip0 = HIP[i, 0]
+        pos0 = nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS])
+        steps0 = IST[i, ST_STEPS]
+        if STATUS[i] == STATUS_OK:
+            STATUS[i], NEV[i] = nb_advance_w(
+                chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i],
+                FORCES[i], W, S,
+            )  # fmt: skip
+        else:
+            NEV[i] = 0
+        nb_observe_row(
+            chs, scs, Q[i], QD[i], IST[i], FST[i], FORCES[i], OBS[i], HIP[i], OBS_LOW, OBS_HIGH, K
+        )
+        if STATUS[i] < 0:
+            REW[i, :] = 0.0
+            FELL[i] = 0
+            continue
+        fell = STATUS[i] == STATUS_OK and nb_fallen(HIP[i, 1], cfg)
+        FELL[i] = 1 if fell else 0
+        terminated = STATUS[i] == STATUS_TERMINATED or STATUS[i] == STATUS_NONFINITE or fell
+        nb_reward_terms(
+            HIP[i, 0] - hip0,
+            dt,
+            nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS]) - pos0,
+            IST[i, ST_STEPS] - steps0,
+            not terminated,
+            TAU[i, 0],
+            cfg,
+            REW[i],
+        )
+
+
+@njit(cache=True)
+def nb_env_period(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    REW, FELL,
+):  # fmt: skip
+    """One control period of N environments (rows), serially.
+
+    The simulator's arguments (:func:`~.simulator.nb_advance_batch`), then: OBS (n, 24) and
+    HIP (n, 4), the observation and hip kinematics, read before (progress) and written after
+    the period; cfg, :func:`~.rewards.reward_config`; REW (n, 6), written: the reward terms
+    and their sum (zeros for rows whose STATUS is negative: resetting, not stepped); FELL
+    (n,), written: 1 where the hip fell below the fall height in this period. Rows with
+    STATUS != 0 are not advanced.
+    """
+    _period_range(
+        chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
+        cfg, REW, FELL, 0, Q.shape[0],
+    )  # fmt: skip
+
+
+@njit(cache=True, parallel=True)
+def nb_env_period_parallel(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    REW, FELL, nt,
+):  # fmt: skip
+    """:func:`nb_env_period` split into ``nt`` chunks of rows, one per thread (same results)."""
+    n = Q.shape[0]
+    chunk = (n + nt - 1) // nt
+    for c in numba.prange(nt):
+        _period_range(
+            chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
+            HIP, cfg, REW, FELL, c * chunk, min(n, (c + 1) * chunk),
+        )  # fmt: skip
+
+
+class EnvBuffers:
+    """The arrays one compiled period reads and writes for N environments.
+
+    ``sim`` (:class:`~.simulator.SimArrays`), ``tau`` (n, 4, 5) torque tables [N m], ``obs``
+    (n, 24), ``hip`` (n, 4: hip y, z, vy, vz), ``rew`` (n, 6: the reward terms and their sum)
+    and ``fell`` (n,). :meth:`period` runs :func:`nb_env_period` on them with its arguments
+    bound once; batches of at least ``PARALLEL_MIN_BATCH`` use numba's threads.
+    """
+
+    def __init__(self, n: int, params, options, dt: float, cfg: np.ndarray):
+        """Allocate for ``n`` environments of the given robot, physics, period [s] and rewards."""
+        self.sim = SimArrays(n)
+        self.tau = np.zeros((n, 4, N_ACTUATED))
+        self.obs = np.zeros((n, OBS_DIM))
+        self.hip = np.zeros((n, 4))
+        self.rew = np.zeros((n, N_REWARD_OUT))
+        self.fell = np.zeros(n, np.int64)
+        chs, scs = params.packed
+        iopt, fopt, a, b = options.packed
+        s = self.sim
+        self._args = (
+            chs, scs, s.q, s.qd, s.ist, s.fst, self.tau, float(dt), iopt, fopt, a, b, s.events,
+            s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell,
+        )  # fmt: skip
+        self._parallel = n >= PARALLEL_MIN_BATCH
+        self._observe_args = (chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self.obs, self.hip)
+
+    def period(self) -> None:
+        """Advance every running row by one period; observe and reward every row."""
+        if self._parallel and numba.get_num_threads() > 1:
+            nb_env_period_parallel(*self._args, numba.get_num_threads())
+        else:
+            nb_env_period(*self._args)
+
+    def observe(self) -> None:
+        """Fill ``obs`` and ``hip`` from the current states (after a reset)."""
+        nb_observe(*self._observe_args, OBS_LOW, OBS_HIGH)
