@@ -279,7 +279,7 @@ class ConstrainedBipedEnv(gym.Env):
             self._sim.q[0], self._sim.qd[0] = q, qd
             start_sampled(self.params, self.options, self._sim, np.zeros(1, np.int64), mode)
         self._observe()
-        info = self._info(events=(), terms=dict.fromkeys(REWARD_TERMS, 0.0), reason=None)
+        info = self._info((), (0.0,) * len(REWARD_TERMS), None)
         if self.render_mode == "human":
             self.render()
         return self._obs[0].copy(), info
@@ -303,7 +303,7 @@ class ConstrainedBipedEnv(gym.Env):
         elif buf.fell[0]:
             reason = TERMINATION_FALL
         *parts, reward = buf.rew[0].tolist()
-        info = self._info(events, dict(zip(REWARD_TERMS, parts, strict=True)), reason)
+        info = self._info(events, parts, reason)
         if self.render_mode == "human":
             self.render()
         return buf.obs[0].copy(), reward, reason is not None, False, info
@@ -312,20 +312,27 @@ class ConstrainedBipedEnv(gym.Env):
         self._buf.observe()
 
     def _info(self, events, terms, reason) -> dict[str, Any]:
+        """The info dict; ``terms``: the reward terms' values in REWARD_TERMS order."""
         mode, side, steps, _ = self._sim.ist[0].tolist()
-        return {
+        if events:
+            switches = tuple(
+                (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
+            )
+            events = tuple((e.t, e.code.name.lower(), e.terminal) for e in events)
+        else:
+            switches = ()
+        info = {
             "mode": mode,
             "stance_side": side,
             "steps_completed": steps,
-            "t": self._sim.fst[0, 0].item(),
-            "hip_y": self._hip[0, 0].item(),
-            "switches": tuple(
-                (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
-            ),
-            "events": tuple((e.t, e.code.name.lower(), e.terminal) for e in events),
+            "t": self._sim.fst[0].tolist()[0],
+            "hip_y": self._hip[0].tolist()[0],
+            "switches": switches,
+            "events": events,
             "termination_reason": reason,
-            **terms,
         }
+        info.update(zip(REWARD_TERMS, terms, strict=True))
+        return info
 
     def render(self):
         """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""

@@ -84,24 +84,31 @@ G_FOOT_PULLS = int(EventCode.STANCE_FOOT_PULLS)
 
 @njit(cache=True)
 def nb_make_work():
-    """A fresh workspace for the ``_w`` functions."""
+    """A fresh workspace for the ``_w`` functions (zeroed views of one allocation)."""
+    buf = np.zeros(2 * 6 * NK + 36 + 24 + 12 + 6 + 49 + 7 + 12 + 12 + 6 + 6 + 1 + 6 + 18)
     return (
-        np.empty((6, NK)),  # K: forward pass at the current state
-        np.empty((6, NK)),  # Kp: forward pass at the previous sample (finite-difference J-dot)
-        np.empty((6, 6)),  # M
-        np.empty((4, 6)),  # CRBA scratch
-        np.empty((6, 2)),  # joint forces
-        np.empty(6),  # joint moments / bias
-        np.empty((7, 7)),  # KKT matrix
-        np.empty(7),  # KKT right-hand side / solution
-        np.empty((2, 6)),  # point Jacobian
-        np.empty((2, 6)),  # point Jacobian at the previous sample
-        np.empty(6),  # qdd
-        np.zeros(6),  # zeros (never written)
-        np.zeros(1),  # count of constrained solves (cost accounting)
-        np.zeros(6),  # unit vector scratch (mass matrix by Newton-Euler columns)
-        np.empty((6, 3)),  # three right-hand sides (solve with implicit friction)
+        buf[0 : 6 * NK].reshape((6, NK)),  # K: forward pass at the current state
+        buf[6 * NK : 12 * NK].reshape((6, NK)),  # Kp: at the previous sample (FD J-dot)
+        nb_carve(buf, 12 * NK, 6, 6),  # M
+        nb_carve(buf, 12 * NK + 36, 4, 6),  # CRBA scratch
+        nb_carve(buf, 12 * NK + 60, 6, 2),  # joint forces
+        buf[12 * NK + 72 : 12 * NK + 78],  # joint moments / bias
+        nb_carve(buf, 12 * NK + 78, 7, 7),  # KKT matrix
+        buf[12 * NK + 127 : 12 * NK + 134],  # KKT right-hand side / solution
+        nb_carve(buf, 12 * NK + 134, 2, 6),  # point Jacobian
+        nb_carve(buf, 12 * NK + 146, 2, 6),  # point Jacobian at the previous sample
+        buf[12 * NK + 158 : 12 * NK + 164],  # qdd
+        buf[12 * NK + 164 : 12 * NK + 170],  # zeros (never written)
+        buf[12 * NK + 170 : 12 * NK + 171],  # count of constrained solves (cost accounting)
+        buf[12 * NK + 171 : 12 * NK + 177],  # unit vector scratch (mass matrix by NE columns)
+        nb_carve(buf, 12 * NK + 177, 6, 3),  # three right-hand sides (implicit friction)
     )
+
+
+@njit(cache=True)
+def nb_carve(buf, start, rows, cols):
+    """The (rows, cols) C-contiguous view of ``buf[start : start + rows * cols]``."""
+    return buf[start : start + rows * cols].reshape((rows, cols))
 
 
 @njit(cache=True)

@@ -47,6 +47,7 @@ from .hybrid import (
     N_FORCES,
     N_IOPT,
     W_QDD,
+    nb_carve,
     nb_evaluate,
     nb_evaluate_w,
     nb_impact,
@@ -308,21 +309,24 @@ S_KQ, S_KV, S_QS, S_VS, S_Q1, S_QD1, S_QH, S_QDH, S_G, S_G1, S_TAU6, S_F, S_K1 =
 
 @njit(cache=True)
 def nb_make_scratch():
-    """Scratch arrays of the stepping loop (stages, trial states, guard vectors)."""
+    """Scratch arrays of the stepping loop (zeroed views of one allocation)."""
+    buf = np.zeros(24 + 24 + 6 * 6 + 2 * N_GUARDS + 6 + N_FORCES + 7)
+    g = 84 + 2 * N_GUARDS
     return (
-        np.zeros((4, 6)),  # kq: stage velocities
-        np.zeros((4, 6)),  # kv: stage accelerations
-        np.empty(6),  # stage q
-        np.empty(6),  # stage qd
-        np.empty(6),  # q after a step
-        np.empty(6),  # qd after a step
-        np.empty(6),  # q at the bracket's upper end (event location)
-        np.empty(6),  # qd at the bracket's upper end
-        np.empty(N_GUARDS),  # guards
-        np.empty(N_GUARDS),  # guards after a step
-        np.zeros(6),  # tau6
-        np.zeros(N_FORCES),  # forces scratch
-        np.zeros(7),  # qdd at the current start state (first RK stage, reused), slip speed
+        nb_carve(buf, 0, 4, 6),  # kq: stage velocities
+        nb_carve(buf, 24, 4, 6),  # kv: stage accelerations
+        buf[48:54],  # stage q
+        buf[54:60],  # stage qd
+        buf[60:66],  # q after a step
+        buf[66:72],  # qd after a step
+        buf[72:78],  # q at the bracket's upper end (event location)
+        buf[78:84],  # qd at the bracket's upper end
+        buf[84 : 84 + N_GUARDS],  # guards
+        buf[84 + N_GUARDS : g],  # guards after a step
+        buf[g : g + 6],  # tau6
+        buf[g + 6 : g + 6 + N_FORCES],  # forces scratch
+        buf[g + 6 + N_FORCES : g + 13 + N_FORCES],  # qdd at the start state (first RK stage,
+        # reused), slip speed
     )
 
 
