@@ -7,10 +7,11 @@ seeded random actions scaled to 5% of the action bound, reset on termination/tru
 (reset time included). Prints us per env.step, and env-steps/s of the batched vector env
 against Walker2d-v5's ``make_vec(..., vectorization_mode="sync")``, with the ratios.
 
-Random torques end a walking-task episode within a period or two, so that row is mostly
-resets; the row "walking" replays the actions the model controller
-(``training/controllers/teacher_robust.json``) gave on seed 0, recorded before the timing: the
-env walks the same way again (the simulator is deterministic) and no reset is timed.
+Random torques end a walking-task episode in its first period (the stance toe pulls off the
+ground), so those rows time a reset and one terminated period per episode. The "walking" rows
+replay the actions the model controller (``training/controllers/teacher_robust.json``) gave,
+recorded before the timing from the same seeds: the env walks the same way again (the simulator
+is deterministic) and no reset is timed. They time ``env.step`` as it is used.
 """
 
 from __future__ import annotations
@@ -42,6 +43,31 @@ def walking_actions(n: int, seed: int = 0) -> np.ndarray:
     return acts
 
 
+def walking_actions_batched(n: int, num_envs: int, seed: int = 0) -> np.ndarray:
+    """The model controller's actions (n, num_envs, 5) over n periods of the batched default
+    walking task reset with ``seed`` (sub-environment i seeded seed + i)."""
+    from training.model_controller import controller_from
+
+    venv = gym.make_vec(
+        "ConstrainedBiped-v0",
+        num_envs=num_envs,
+        vectorization_mode="vector_entry_point",
+        max_episode_steps=n + 1,
+    )
+    ctl = controller_from("model:training/controllers/teacher_robust.json")
+    obs, _ = venv.reset(seed=seed)
+    acts = np.empty((n, num_envs, 5), np.float32)
+    for k in range(n):
+        acts[k] = ctl(obs)
+        obs, _, te, tr, _ = venv.step(acts[k])
+        if np.any(te | tr):
+            raise RuntimeError(
+                f"the controller stopped walking at period {k} in {np.flatnonzero(te | tr)}"
+            )
+    venv.close()
+    return acts
+
+
 def per_step_us(env_id: str, n: int, seed: int = 0, acts=None, **kwargs) -> float:
     """us per env.step: seeded random actions (5% of the bound, warmed up, resets timed), or
     a replay of ``acts`` from the reset with ``seed`` (no warm-up, so no reset is timed)."""
@@ -67,17 +93,24 @@ def per_step_us(env_id: str, n: int, seed: int = 0, acts=None, **kwargs) -> floa
 
 
 def vec_steps_per_s(
-    env_id: str, num_envs: int, mode: str, n: int, seed: int = 0, **kwargs
+    env_id: str, num_envs: int, mode: str, n: int, seed: int = 0, acts=None, **kwargs
 ) -> float:
+    """env-steps/s of a vector env: seeded random actions (as :func:`per_step_us`, warmed up),
+    or a replay of ``acts`` (n, num_envs, 5) from the reset with ``seed``."""
+    replay = acts is not None
+    if replay:
+        kwargs["max_episode_steps"] = len(acts) + 1
     venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **kwargs)
     venv.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    high = venv.single_action_space.high
-    acts = (rng.uniform(-1, 1, (n, num_envs, high.size)) * high * ACTION_FRACTION).astype(
-        np.float32
-    )
-    for k in range(min(n, 50)):
-        venv.step(acts[k])
+    if not replay:
+        rng = np.random.default_rng(seed)
+        high = venv.single_action_space.high
+        acts = (rng.uniform(-1, 1, (n, num_envs, high.size)) * high * ACTION_FRACTION).astype(
+            np.float32
+        )
+        for k in range(min(n, 50)):
+            venv.step(acts[k])
+    n = len(acts)
     t0 = time.perf_counter()
     for k in range(n):
         venv.step(acts[k])
@@ -101,12 +134,15 @@ def main(argv=None) -> int:
     env_id = "ConstrainedBiped-v0"
     acts = walking_actions(args.steps)
     replay = per_step_us(env_id, args.steps, acts=acts)
+    acts_b = walking_actions_batched(n_vec * 4, args.num_envs)
+    replay_b = vec_steps_per_s(env_id, args.num_envs, "vector_entry_point", 0, acts=acts_b)
     print(
         f"{env_id} default, walking (a controller's recorded actions, no resets): env.step "
-        f"{replay:.1f} us (ratio {replay / walker:.3f}, target <= 0.1)"
+        f"{replay:.1f} us (ratio {replay / walker:.3f}, target <= 0.1) | batched "
+        f"{replay_b:.0f} steps/s (ratio {replay_b / walker_s:.1f}, target >= 50)"
     )
     for label, kw in (
-        ("default: walking task, 5 ms, RK4_LIMEX x 2", {}),
+        ("default, random actions (a reset and one period per episode)", {}),
         (
             "task='paper', preset='default': 20 ms, RK4_LIMEX x 8",
             {"task": "paper", "preset": "default"},
