@@ -122,7 +122,7 @@ def vec_steps_per_s(
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=5000, help="env.step calls per timing")
-    ap.add_argument("--num-envs", type=int, default=64, help="sub-environments of the vector envs")
+    ap.add_argument("--num-envs", type=int, default=256, help="sub-environments of the vector envs")
     args = ap.parse_args(argv)
     walker = per_step_us("Walker2d-v5", args.steps)
     n_vec = max(args.steps // args.num_envs, 20)

@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .actions import TORQUE_LIMIT_NM, check_action_settings, validate_action
+from .actions import TORQUE_LIMIT_NM, action_config, check_action_settings, validate_action
 from .model import N_ACTUATED, BipedParams, paper_biped
 from .modes import EventCode
 from .observation import observation_space
@@ -249,6 +249,7 @@ class ConstrainedBipedEnv(gym.Env):
             self.options,
             self.dt,
             reward_config(self.weights, self.torque_limit_nm, self.fall_hip_height_m),
+            action_config(self.torque_limit_nm, self.out_of_range),
         )
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
@@ -286,13 +287,16 @@ class ConstrainedBipedEnv(gym.Env):
 
     def step(self, action):
         """Apply the torques for one control period (see the class docstring)."""
-        tau = validate_action(action, self.torque_limit_nm, self.out_of_range)
+        a = action if isinstance(action, np.ndarray) else np.asarray(action)
         buf = self._buf
         sim = buf.sim
-        if sim.status[0] != 0:
+        if a.shape != (N_ACTUATED,) or a.dtype.kind not in "fiu" or sim.status[0] != 0:
+            validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises if invalid
             raise RuntimeError("step() called after the episode ended; call reset()")
-        buf.tau[0] = tau
-        buf.period()
+        buf.tau[0] = a  # float64, every model's row; checked (and clipped) in compiled code
+        if buf.period():
+            validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises its ValueError
+            raise AssertionError(f"the compiled torque check refused {a}, validate_action not")
         status = sim.status[0]
         events = sim.events_of(0) if sim.n_events[0] else ()
         reason = None
@@ -325,8 +329,8 @@ class ConstrainedBipedEnv(gym.Env):
             "mode": mode,
             "stance_side": side,
             "steps_completed": steps,
-            "t": self._sim.fst[0].tolist()[0],
-            "hip_y": self._hip[0].tolist()[0],
+            "t": self._sim.fst.item(0),  # row 0, column 0 (fastest scalar read)
+            "hip_y": self._hip.item(0),
             "switches": switches,
             "events": events,
             "termination_reason": reason,

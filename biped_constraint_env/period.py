@@ -13,6 +13,7 @@ import numba
 import numpy as np
 from numba import njit
 
+from .actions import nb_check_torques
 from .hybrid import nb_make_work
 from .kinematics import NK
 from .model import N_ACTUATED, N_LINKS
@@ -79,29 +80,36 @@ def _period_range(
 @njit(cache=True)
 def nb_env_period(
     chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL,
+    REW, FELL, acfg,
 ):  # fmt: skip
-    """One control period of N environments (rows), serially.
+    """One control period of N environments (rows), serially; 0, or 1 if a torque is refused.
 
-    The simulator's arguments (:func:`~.simulator.nb_advance_batch`), then: OBS (n, 24) and
-    HIP (n, 4), the observation and hip kinematics, read before (progress) and written after
-    the period; cfg, :func:`~.rewards.reward_config`; REW (n, 6), written: the reward terms
-    and their sum (zeros for rows whose STATUS is negative: resetting, not stepped); FELL
-    (n,), written: 1 where the hip fell below the fall height in this period. Rows with
-    STATUS != 0 are not advanced.
+    TAU is checked (and clipped) first, every row, by :func:`~.actions.nb_check_torques`
+    with ``acfg``; if it refuses one, nothing else is done and 1 is returned. Arguments: the
+    simulator's (:func:`~.simulator.nb_advance_batch`), then OBS (n, 24) and HIP (n, 4), the
+    observation and hip kinematics, read before (progress) and written after the period;
+    cfg, :func:`~.rewards.reward_config`; REW (n, 6), written: the reward terms and their sum
+    (zeros for rows whose STATUS is negative: resetting, not stepped); FELL (n,), written: 1
+    where the hip fell below the fall height in this period; acfg. Rows with STATUS != 0 are
+    not advanced.
     """
+    if nb_check_torques(TAU, acfg) != 0:
+        return 1
     _period_range(
         chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
         cfg, REW, FELL, 0, Q.shape[0],
     )  # fmt: skip
+    return 0
 
 
 @njit(cache=True, parallel=True)
 def nb_env_period_parallel(
     chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, nt,
+    REW, FELL, acfg, nt,
 ):  # fmt: skip
     """:func:`nb_env_period` split into ``nt`` chunks of rows, one per thread (same results)."""
+    if nb_check_torques(TAU, acfg) != 0:
+        return 1
     n = Q.shape[0]
     chunk = (n + nt - 1) // nt
     for c in numba.prange(nt):
@@ -109,6 +117,7 @@ def nb_env_period_parallel(
             chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
             HIP, cfg, REW, FELL, c * chunk, min(n, (c + 1) * chunk),
         )  # fmt: skip
+    return 0
 
 
 class EnvBuffers:
@@ -125,8 +134,11 @@ class EnvBuffers:
     per-call type dispatch (about 1 us of a 20 us ``env.step``).
     """
 
-    def __init__(self, n: int, params, options, dt: float, cfg: np.ndarray):
-        """Allocate for ``n`` environments of the given robot, physics, period [s] and rewards."""
+    def __init__(self, n: int, params, options, dt: float, cfg: np.ndarray, acfg: np.ndarray):
+        """Allocate for ``n`` environments of a robot, physics, period [s] and settings.
+
+        ``cfg``: :func:`~.rewards.reward_config`; ``acfg``: :func:`~.actions.action_config`.
+        """
         self.sim = SimArrays(n)
         self.tau = np.zeros((n, 4, N_ACTUATED))
         self.obs = np.zeros((n, OBS_DIM))
@@ -138,27 +150,46 @@ class EnvBuffers:
         s = self.sim
         self._args = (
             chs, scs, s.q, s.qd, s.ist, s.fst, self.tau, float(dt), iopt, fopt, a, b, s.events,
-            s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell,
+            s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell, acfg,
         )  # fmt: skip
         self._parallel = n >= PARALLEL_MIN_BATCH
-        self._serial = _entry_point(nb_env_period, self._args)
-        if self._parallel:
-            self._threaded = _entry_point(nb_env_period_parallel, (*self._args, 2))
         self._observe_args = (
             chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self.obs, self.hip, OBS_LOW, OBS_HIGH,
         )  # fmt: skip
+        self._bind()
+
+    def _bind(self) -> None:
+        self._serial = _entry_point(nb_env_period, self._args)
+        self._threaded = (
+            _entry_point(nb_env_period_parallel, (*self._args, 2)) if self._parallel else None
+        )
         self._observe = _entry_point(nb_observe, self._observe_args)
 
-    def period(self) -> None:
-        """Advance every running row by one period; observe and reward every row."""
+    def __getstate__(self) -> dict:
+        """Picklable state: the arrays (entry points are rebound on unpickling)."""
+        return {k: v for k, v in self.__dict__.items() if k not in _ENTRY_POINTS}
+
+    def __setstate__(self, state: dict) -> None:
+        """Restore the arrays and bind the compiled entry points again."""
+        self.__dict__.update(state)
+        self._bind()
+
+    def period(self) -> int:
+        """One period of every row: 0, or 1 if a torque in ``tau`` is refused (nothing done).
+
+        Checks (and clips) the torques, then advances every running row, observes and rewards
+        every row.
+        """
         if self._parallel and numba.get_num_threads() > 1:
-            self._threaded(*self._args, numba.get_num_threads())
-        else:
-            self._serial(*self._args)
+            return self._threaded(*self._args, numba.get_num_threads())
+        return self._serial(*self._args)
 
     def observe(self) -> None:
         """Fill ``obs`` and ``hip`` from the current states (after a reset)."""
         self._observe(*self._observe_args)
+
+
+_ENTRY_POINTS = ("_serial", "_threaded", "_observe")
 
 
 def _entry_point(dispatcher, args: tuple):

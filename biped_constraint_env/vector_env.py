@@ -17,7 +17,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .actions import validate_actions
+from .actions import action_config, validate_actions
 from .env import ConstrainedBipedEnv
 from .model import N_ACTUATED
 from .period import EnvBuffers
@@ -76,6 +76,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self.options,
             self.dt,
             reward_config(p.weights, p.torque_limit_nm, p.fall_hip_height_m),
+            action_config(p.torque_limit_nm, p.out_of_range),
         )
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._elapsed = np.zeros(num_envs, np.int64)
@@ -135,7 +136,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         buf = self._buf
         buf.sim.status[resetting] = -1  # not stepped this period; zero reward
         buf.tau[:] = tau[:, None, :]
-        buf.period()
+        if buf.period():  # the actions were validated above, so this cannot fail
+            raise AssertionError(f"the compiled torque check refused validated torques {tau}")
         buf.sim.status[resetting] = 0
         buf.sim.n_events[resetting] = 0
         status = buf.sim.status

@@ -1,6 +1,7 @@
 """One direction of dependency: model -> kinematics -> dynamics -> contact -> modes -> hybrid
 -> simulator -> (the env's parts: tasks, actions, starts, rewards, observation) -> period (their
-compiled control period) -> env -> vector_env. Each module may import only modules of lower or equal rank."""
+compiled control period) -> env -> vector_env. Each module may import only modules of lower or
+equal rank."""
 
 import ast
 from pathlib import Path

@@ -130,6 +130,41 @@ def test_out_of_range_clip_or_raise():
         env2.step(np.full(5, 200.0))
 
 
+@pytest.mark.parametrize("policy", ["clip", "raise"])
+def test_compiled_torque_check_agrees_with_validate_actions(policy):
+    """The env's compiled check refuses exactly what validate_actions refuses, clips the same."""
+    from biped_constraint_env.actions import action_config, nb_check_torques, validate_actions
+
+    rng = np.random.default_rng(3)
+    acfg = action_config(150.0, policy)
+    specials = [np.nan, np.inf, -np.inf, 150.0, -150.0, 150.0001, -1e9, 0.0]
+    for _ in range(400):
+        a = rng.uniform(-200, 200, 5)
+        for j in np.flatnonzero(rng.random(5) < 0.2):
+            a[j] = specials[rng.integers(len(specials))]
+        table = np.broadcast_to(a, (1, 4, 5)).copy()
+        try:
+            expected = validate_actions(a, 150.0, policy)
+        except ValueError:
+            expected = None
+        refused = nb_check_torques(table, acfg)
+        assert refused == (expected is None), a
+        if expected is not None:
+            assert np.array_equal(table, np.broadcast_to(expected, (1, 4, 5))), a
+
+
+def test_refused_action_leaves_the_state():
+    env = ConstrainedBipedEnv(**V1, out_of_range="raise")
+    env.reset(seed=0)
+    before = env.state
+    for bad in (np.array([0, 0, np.nan, 0, 0]), np.full(5, 151.0)):
+        with pytest.raises(ValueError, match="action"):
+            env.step(bad)
+        after = env.state
+        assert after.t == before.t and np.array_equal(after.q, before.q)
+    env.step(np.zeros(5))  # still usable
+
+
 def test_reset_options_and_impossible_state():
     env = ConstrainedBipedEnv(**V1)
     q = np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])
