@@ -306,8 +306,8 @@ class ConstrainedBipedEnv(gym.Env):
             reason = TERMINATION_NON_FINITE
         elif buf.fell[0]:
             reason = TERMINATION_FALL
-        *parts, reward = buf.rew[0].tolist()
-        info = self._info(events, parts, reason)
+        *terms, reward = buf.rew[0].tolist()
+        info = self._info(events, terms, reason)
         if self.render_mode == "human":
             self.render()
         return buf.obs[0].copy(), reward, reason is not None, False, info
@@ -325,7 +325,8 @@ class ConstrainedBipedEnv(gym.Env):
             events = tuple((e.t, e.code.name.lower(), e.terminal) for e in events)
         else:
             switches = ()
-        info = {
+        forward, alive, switch, step, ctrl = terms  # REWARD_TERMS order
+        return {
             "mode": mode,
             "stance_side": side,
             "steps_completed": steps,
@@ -334,9 +335,12 @@ class ConstrainedBipedEnv(gym.Env):
             "switches": switches,
             "events": events,
             "termination_reason": reason,
+            "reward_forward": forward,
+            "reward_alive": alive,
+            "reward_switch": switch,
+            "reward_step": step,
+            "reward_ctrl": ctrl,
         }
-        info.update(zip(REWARD_TERMS, terms, strict=True))
-        return info
 
     def render(self):
         """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""

@@ -34,6 +34,7 @@ from .kinematics import (
     K_SIN,
     NK,
     nb_fk,
+    nb_fk_accelerations,
     nb_forward_pass,
     nb_point_jacobian,
 )
@@ -431,7 +432,7 @@ def nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd_h, W, forces, g):
         jac = W[W_JAC]  # still the contact Jacobian at q from the solve
         for j in range(6):
             slip += jac[0, j] * qd[j]
-    nb_fk(ch, q, qd, W[W_QDD], 0.0, K)
+    nb_fk_accelerations(ch, W[W_QDD], K)  # K holds the solve's pass at (q, qd)
     nb_rnea_backward(ch, K, sc[SC_GRAVITY], link, s_off, fy, fz, f, nmom)
     forces[FC_CONTACT] = fn
     forces[FC_STANCE_Y] = f[0, 0]

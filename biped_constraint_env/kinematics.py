@@ -84,6 +84,31 @@ def nb_fk(ch, q, qd, qdd, root_y, K):
 
 
 @njit(cache=True)
+def nb_fk_accelerations(ch, qdd, K):
+    """Refill only the accelerations of a table K from :func:`nb_fk` for new joint ``qdd``.
+
+    The angles, rates and positions in K are kept (no trigonometry); the acceleration entries
+    follow :func:`nb_fk`'s formulas, so the table equals ``nb_fk(ch, q, qd, qdd, root_y, K)``
+    bit for bit.
+    """
+    al_prev = 0.0
+    for i in range(N_LINKS):
+        K[i, K_AL] = al_prev + qdd[i]
+        if i == 0:
+            K[0, K_AY] = 0.0
+            K[0, K_AZ] = 0.0
+        else:
+            ln = ch[i - 1, COL_NEXT]
+            ry = ln * K[i - 1, K_COS]
+            rz = ln * K[i - 1, K_SIN]
+            wp = K[i - 1, K_W]
+            alp = K[i - 1, K_AL]
+            K[i, K_AY] = K[i - 1, K_AY] - alp * rz - wp * wp * ry
+            K[i, K_AZ] = K[i - 1, K_AZ] + alp * ry - wp * wp * rz
+        al_prev = K[i, K_AL]
+
+
+@njit(cache=True)
 def nb_point(K, link, s):
     """(py, pz, vy, vz, ay, az) of the point at offset s [m] on ``link`` (no allocation)."""
     ry = s * K[link, K_COS]

@@ -62,3 +62,15 @@ def test_bad_inputs_raise(chain):
         kin.point_position(chain, np.full(6, np.nan), 1, 0.0)
     with pytest.raises(ValueError, match="link"):
         kin.point_position(chain, np.zeros(6), 6, 0.0)
+
+
+def test_acceleration_refill_equals_a_full_pass(chain, rng):
+    """nb_fk_accelerations on a pass at (q, qd, 0) gives nb_fk's table at (q, qd, qdd) exactly."""
+    for _ in range(20):
+        q, qd, qdd = rng.normal(size=6), rng.normal(size=6), rng.normal(size=6) * 10
+        full = np.empty((6, kin.NK))
+        kin.nb_fk(chain.packed, q, qd, qdd, 0.0, full)
+        refill = np.empty((6, kin.NK))
+        kin.nb_fk(chain.packed, q, qd, np.zeros(6), 0.0, refill)
+        kin.nb_fk_accelerations(chain.packed, qdd, refill)
+        assert np.array_equal(full, refill)
