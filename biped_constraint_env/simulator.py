@@ -1045,11 +1045,12 @@ class SimArrays:
 
 
 @njit(cache=True)
-def nb_start_batch(chs, scs, Q, QD, IST, FST, FORCES, STATUS, NEV, idx, iopt, fopt):
-    """Prepare slots ``idx`` for a new episode; returns each slot's lowest keypoint z [m].
+def nb_start_batch(chs, scs, Q, QD, IST, FST, FORCES, STATUS, NEV, idx, modes, iopt, fopt):
+    """Start slots ``idx`` (their Q, QD set) in ``modes``; returns each one's lowest point z [m].
 
-    Computes the contact forces at zero torque (for the first observation) and clears the
-    status and event count. The caller rejects states whose lowest point is below ground.
+    Leg A stands with its toe at y = 0 and t = 0, no step completed. Computes the contact
+    forces at zero torque (for the first observation) and clears the status and event count.
+    The caller rejects states whose lowest point is below ground.
     """
     W = nb_make_work()
     g = np.empty(N_GUARDS)
@@ -1057,6 +1058,9 @@ def nb_start_batch(chs, scs, Q, QD, IST, FST, FORCES, STATUS, NEV, idx, iopt, fo
     low = np.empty(idx.shape[0])
     for k in range(idx.shape[0]):
         i = idx[k]
+        IST[i, :] = 0
+        IST[i, ST_MODE] = modes[k]
+        FST[i, :] = 0.0
         side = IST[i, ST_SIDE]
         pts = nb_keypoints(chs[side], scs[side], Q[i], FST[i, FS_ROOT])
         low[k] = pts[:, 1].min()
