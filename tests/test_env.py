@@ -309,3 +309,14 @@ def test_midstride_start():
         ConstrainedBipedEnv(start="running")
     with pytest.raises(ValueError):
         midstride_start(-1.0, 0.1)
+
+
+def test_start_draws_equal_numpy_uniform():
+    """The starts' cheaper uniform draws are numpy's ``Generator.uniform`` numbers exactly."""
+    from biped_constraint_env.starts import _uniform
+
+    a, b = np.random.default_rng(11), np.random.default_rng(11)
+    for _ in range(2000):
+        x, y = a.uniform(-1.1, -0.9), _uniform(b, -1.1, -0.9)
+        assert x == y and type(x) is type(y)
+        assert np.array_equal(a.uniform(-0.01, 0.01, size=5), _uniform(b, -0.01, 0.01, 5))
