@@ -65,8 +65,8 @@ def action_config(limit: float, out_of_range: str) -> np.ndarray:
 
 
 @njit(cache=True)
-def nb_check_torques(TAU, acfg) -> int:
-    """The compiled twin of :func:`validate_actions` on torque tables (n, 4, 5), in place.
+def nb_check_torques(ACT, acfg) -> int:
+    """The compiled twin of :func:`validate_actions` on float64 actions (n, 5), in place.
 
     Returns 0 when every torque is finite and, with ``acfg[1] == 1``, clips it to
     ``[-acfg[0], acfg[0]]``; returns 1 (the caller raises through :func:`validate_action`)
@@ -74,14 +74,13 @@ def nb_check_torques(TAU, acfg) -> int:
     """
     limit = acfg[0]
     clip = acfg[1] != 0.0
-    for i in range(TAU.shape[0]):
-        for m in range(TAU.shape[1]):
-            for j in range(TAU.shape[2]):
-                x = TAU[i, m, j]
-                if not np.isfinite(x):
+    for i in range(ACT.shape[0]):
+        for j in range(ACT.shape[1]):
+            x = ACT[i, j]
+            if not np.isfinite(x):
+                return 1
+            if x > limit or x < -limit:
+                if not clip:
                     return 1
-                if x > limit or x < -limit:
-                    if not clip:
-                        return 1
-                    TAU[i, m, j] = min(max(x, -limit), limit)
+                ACT[i, j] = min(max(x, -limit), limit)
     return 0

@@ -293,7 +293,7 @@ class ConstrainedBipedEnv(gym.Env):
         if a.shape != (N_ACTUATED,) or a.dtype.kind not in "fiu" or sim.status[0] != 0:
             validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises if invalid
             raise RuntimeError("step() called after the episode ended; call reset()")
-        buf.tau[0] = a  # float64, every model's row; checked (and clipped) in compiled code
+        buf.act[0] = a  # as float64; checked (and clipped) in the compiled period
         if buf.period():
             validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises its ValueError
             raise AssertionError(f"the compiled torque check refused {a}, validate_action not")

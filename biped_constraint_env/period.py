@@ -37,20 +37,24 @@ N_REWARD_OUT = 6
 
 @njit(cache=True)
 def _period_range(
-    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
     REW, FELL, lo, hi,
 ):  # fmt: skip
     """:func:`nb_env_period` for rows lo..hi-1, one workspace."""
     W = nb_make_work()
     S = nb_make_scratch()
     K = np.empty((N_LINKS, NK))
+    table = np.empty((4, N_ACTUATED))  # the action holds in every model
     for i in range(lo, hi):
         hip0 = HIP[i, 0]
         pos0 = nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS])
         steps0 = IST[i, ST_STEPS]
         if STATUS[i] == STATUS_OK:
+            for m in range(4):
+                for j in range(N_ACTUATED):
+                    table[m, j] = ACT[i, j]
             STATUS[i], NEV[i] = nb_advance_w(
-                chs, scs, Q[i], QD[i], IST[i], FST[i], TAU[i], dt, iopt, fopt, a, b, EV[i],
+                chs, scs, Q[i], QD[i], IST[i], FST[i], table, dt, iopt, fopt, a, b, EV[i],
                 FORCES[i], W, S,
             )  # fmt: skip
         else:
@@ -71,7 +75,7 @@ def _period_range(
             nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS]) - pos0,
             IST[i, ST_STEPS] - steps0,
             not terminated,
-            TAU[i, 0],
+            ACT[i],
             cfg,
             REW[i],
         )
@@ -79,24 +83,25 @@ def _period_range(
 
 @njit(cache=True)
 def nb_env_period(
-    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
     REW, FELL, acfg,
 ):  # fmt: skip
     """One control period of N environments (rows), serially; 0, or 1 if a torque is refused.
 
-    TAU is checked (and clipped) first, every row, by :func:`~.actions.nb_check_torques`
-    with ``acfg``; if it refuses one, nothing else is done and 1 is returned. Arguments: the
-    simulator's (:func:`~.simulator.nb_advance_batch`), then OBS (n, 24) and HIP (n, 4), the
-    observation and hip kinematics, read before (progress) and written after the period;
-    cfg, :func:`~.rewards.reward_config`; REW (n, 6), written: the reward terms and their sum
-    (zeros for rows whose STATUS is negative: resetting, not stepped); FELL (n,), written: 1
-    where the hip fell below the fall height in this period; acfg. Rows with STATUS != 0 are
-    not advanced.
+    ACT (n, 5), the actions (torques [N m], held over the period in every model), is checked
+    (and clipped) first, every row, by :func:`~.actions.nb_check_torques` with ``acfg``; if it
+    refuses one, nothing else is done and 1 is returned. Arguments: the simulator's
+    (:func:`~.simulator.nb_advance_batch`, with ACT for its torque tables), then OBS (n, 24)
+    and HIP (n, 4), the observation and hip kinematics, read before (progress) and written
+    after the period; cfg, :func:`~.rewards.reward_config`; REW (n, 6), written: the reward
+    terms and their sum (zeros for rows whose STATUS is negative: resetting, not stepped);
+    FELL (n,), written: 1 where the hip fell below the fall height in this period; acfg. Rows
+    with STATUS != 0 are not advanced.
     """
-    if nb_check_torques(TAU, acfg) != 0:
+    if nb_check_torques(ACT, acfg) != 0:
         return 1
     _period_range(
-        chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
+        chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
         cfg, REW, FELL, 0, Q.shape[0],
     )  # fmt: skip
     return 0
@@ -104,17 +109,17 @@ def nb_env_period(
 
 @njit(cache=True, parallel=True)
 def nb_env_period_parallel(
-    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
     REW, FELL, acfg, nt,
 ):  # fmt: skip
     """:func:`nb_env_period` split into ``nt`` chunks of rows, one per thread (same results)."""
-    if nb_check_torques(TAU, acfg) != 0:
+    if nb_check_torques(ACT, acfg) != 0:
         return 1
     n = Q.shape[0]
     chunk = (n + nt - 1) // nt
     for c in numba.prange(nt):
         _period_range(
-            chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
+            chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
             HIP, cfg, REW, FELL, c * chunk, min(n, (c + 1) * chunk),
         )  # fmt: skip
     return 0
@@ -123,7 +128,7 @@ def nb_env_period_parallel(
 class EnvBuffers:
     """The arrays one compiled period reads and writes for N environments.
 
-    ``sim`` (:class:`~.simulator.SimArrays`), ``tau`` (n, 4, 5) torque tables [N m], ``obs``
+    ``sim`` (:class:`~.simulator.SimArrays`), ``act`` (n, 5) the actions [N m], ``obs``
     (n, 24), ``hip`` (n, 4: hip y, z, vy, vz), ``rew`` (n, 6: the reward terms and their sum)
     and ``fell`` (n,). :meth:`period` runs :func:`nb_env_period` on them; batches of at least
     ``PARALLEL_MIN_BATCH`` use numba's threads (:func:`nb_env_period_parallel`).
@@ -140,7 +145,7 @@ class EnvBuffers:
         ``cfg``: :func:`~.rewards.reward_config`; ``acfg``: :func:`~.actions.action_config`.
         """
         self.sim = SimArrays(n)
-        self.tau = np.zeros((n, 4, N_ACTUATED))
+        self.act = np.zeros((n, N_ACTUATED))
         self.obs = np.zeros((n, OBS_DIM))
         self.hip = np.zeros((n, 4))
         self.rew = np.zeros((n, N_REWARD_OUT))
@@ -149,7 +154,7 @@ class EnvBuffers:
         iopt, fopt, a, b = options.packed
         s = self.sim
         self._args = (
-            chs, scs, s.q, s.qd, s.ist, s.fst, self.tau, float(dt), iopt, fopt, a, b, s.events,
+            chs, scs, s.q, s.qd, s.ist, s.fst, self.act, float(dt), iopt, fopt, a, b, s.events,
             s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell, acfg,
         )  # fmt: skip
         self._parallel = n >= PARALLEL_MIN_BATCH
@@ -175,7 +180,7 @@ class EnvBuffers:
         self._bind()
 
     def period(self) -> int:
-        """One period of every row: 0, or 1 if a torque in ``tau`` is refused (nothing done).
+        """One period of every row: 0, or 1 if a torque in ``act`` is refused (nothing done).
 
         Checks (and clips) the torques, then advances every running row, observes and rewards
         every row.

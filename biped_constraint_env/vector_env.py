@@ -26,6 +26,13 @@ from .simulator import STATUS_NONFINITE, evaluate
 from .starts import check_start_state, sample_start, start_sampled, state_from_options
 from .tasks import MAX_EPISODE_STEPS
 
+_MASK_KEYS = tuple(
+    f"_{k}"
+    for k in ("mode", "stance_side", "steps_completed", "t", "hip_y", "termination_reason")
+    + REWARD_TERMS
+)
+"""Gymnasium's per-key masks of the vector info (every entry is set for every env)."""
+
 
 class ConstrainedBipedVectorEnv(VectorEnv):
     """N ConstrainedBiped-v0 environments in one batch (arguments as the single env).
@@ -135,7 +142,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self._reset_slots(resetting)
         buf = self._buf
         buf.sim.status[resetting] = -1  # not stepped this period; zero reward
-        buf.tau[:] = tau[:, None, :]
+        buf.act[:] = tau
         if buf.period():  # the actions were validated above, so this cannot fail
             raise AssertionError(f"the compiled torque check refused validated torques {tau}")
         buf.sim.status[resetting] = 0
@@ -144,7 +151,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         fell = buf.fell.astype(bool)
         terminated = (status > 0) | fell
         self._fell = fell
-        parts = tuple(buf.rew[:, k].copy() for k in range(len(REWARD_TERMS)))
+        parts = tuple(buf.rew[:, : len(REWARD_TERMS)].T.copy())  # one copy, a row per term
         rewards = buf.rew[:, -1].copy()
         self._elapsed += 1
         self._elapsed[resetting] = 0
@@ -176,24 +183,27 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def _infos(self, zeros: np.ndarray, terms) -> dict[str, Any]:
         s = self._sim
         reasons = np.full(self.num_envs, None, dtype=object)
-        reasons[getattr(self, "_fell", np.zeros(self.num_envs, bool))] = TERMINATION_FALL
+        fell = getattr(self, "_fell", None)
+        if fell is not None and fell.any():
+            reasons[fell] = TERMINATION_FALL
         for i in np.flatnonzero(s.status > 0):
             if s.status[i] == STATUS_NONFINITE:
                 reasons[i] = TERMINATION_NON_FINITE
             else:
                 reasons[i] = next(e.code.name.lower() for e in s.events_of(int(i)) if e.terminal)
         parts = terms if terms is not None else (zeros,) * len(REWARD_TERMS)
+        mode, side, steps = s.ist[:, :3].T.copy()  # one copy, a row per entry
         info = {
-            "mode": s.ist[:, 0].copy(),
-            "stance_side": s.ist[:, 1].copy(),
-            "steps_completed": s.ist[:, 2].copy(),
+            "mode": mode,
+            "stance_side": side,
+            "steps_completed": steps,
             "t": s.fst[:, 0].copy(),
             "hip_y": self._hip[:, 0].copy(),
             "termination_reason": reasons,
             **dict(zip(REWARD_TERMS, parts, strict=True)),
         }
         everyone = np.ones(self.num_envs, bool)
-        info.update({f"_{k}": everyone for k in list(info)})
+        info.update(dict.fromkeys(_MASK_KEYS, everyone))
         return info
 
     def close_extras(self, **kwargs: Any) -> None:
