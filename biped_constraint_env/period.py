@@ -1,10 +1,11 @@
 """The environments' control period as one compiled call: physics, observation and reward.
 
 :class:`~.env.ConstrainedBipedEnv` and :class:`~.vector_env.ConstrainedBipedVectorEnv` both
-step through :func:`nb_env_period` (the simulator's :func:`~.simulator.nb_advance_w`, then
-:func:`~.observation.nb_observe`, then :func:`~.rewards.nb_reward_terms`), so they agree bit for
-bit, and a single ``env.step`` enters compiled code once. The Python around it only validates
-the action and builds ``info``.
+step through :func:`nb_env_period`: the torque check (:func:`~.actions.nb_check_torques`), the
+simulator's :func:`~.simulator.nb_advance_w`, the observation
+(:func:`~.observation.nb_observe_row`) and the reward (:func:`~.rewards.nb_reward_terms`), so
+they agree bit for bit, and a single ``env.step`` enters compiled code once. The Python around
+it checks the action's shape and dtype and builds ``info``.
 """
 
 from __future__ import annotations
