@@ -13,6 +13,7 @@ A strict walking step has not been found yet (README, Reproducing Table 2), so t
 cycle is the cleanest two-impact scene. Scene (c): the optimised open-loop table
 (training/configs/open_loop_optimised.toml), a complete cycle 1 -> 2 -> 3 -> 4 -> 1 (and the next
 1 -> 2) in 2.04 s. Reference (b, c): RK4 with 400 substeps per 20 ms, located events.
+Scenes (b) and (c) also sweep the error-controlled RK4_LIMEX's tolerance (ADAPTIVE_TOLS).
 Errors are measured on the absolute angles of the six physical links (invariant to the
 renumbering), on the switch times, and on the point-contact residual.
 Cost: wall time per simulated second (best of 3, compiled loop) and constrained-dynamics
@@ -50,6 +51,7 @@ HYBRID_COLS = [
     "locate_events",
     "jdot",
     "h_ms",
+    "step_tol",
     "max_angle_err_rad",
     "switch_time_err_s",
     "contact_residual_m",
@@ -60,6 +62,13 @@ POSTURE = np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])
 TABLE2_ROW1 = np.array([10.0, 120.0, 35.0, 80.0, 0.0])
 SUBSTEPS = (1, 2, 4, 8, 16, 32, 64, 128, 256, 400)  # per 20 ms: h = 20 ms ... 0.05 ms
 METHODS = ("euler", "semi_implicit", "rk2", "rk4", "limex", "rk4_limex")
+"""The fixed-step methods (every scene, the stability map)."""
+ADAPTIVE = "rk4_limex_adaptive"
+ADAPTIVE_TOLS = (1e-2, 3e-3, 1e-3, 3e-4, 2e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
+"""Error tolerances of the error-controlled method in the hybrid scenes (b, c), at a longest
+step of 10 ms (2 per 20 ms, the default) and of 20 ms (1 per 20 ms, beyond RK4's stability
+limit). Scene (a) and the stability map run fixed steps without the hybrid loop, where there is
+no error control: there it is RK4_LIMEX."""
 DIVERGED_RAD_S = 1e3
 
 
@@ -92,7 +101,7 @@ def run_hybrid(chs, scs, q0, qd0, mode0, dt, n, iopt, fopt, a, b, tau):
     q = q0.copy()
     qd = qd0.copy()
     ist = np.array([mode0, 0, 0, 0])
-    fst = np.zeros(2)
+    fst = np.zeros(3)
     ev = np.zeros((MAX_EVENTS, 5))
     forces = np.zeros(5)
     phys = np.full((n + 1, 6), np.nan)
@@ -255,40 +264,50 @@ def scene_hybrid(params, quick, label, q0, tau, T):
         ("euler", False, "finite_difference"),
         ("rk2", True, "finite_difference"),
     ]
-    for method, locate, jdot in variants:
-        for sub in SUBSTEPS if not quick else SUBSTEPS[:6]:
-            opts = SimOptions(
-                integrator=method, substeps=sub, strict=False, locate_events=locate, jdot=jdot
-            )
-            packed = opts.packed
-            phys, ev, resid, evals = run_hybrid(
-                chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed, tau
-            )
-            sw = ev[ev[:, 1] == 0]
-            same = len(sw) >= len(sw_ref) and np.all(sw[: len(sw_ref), 2:] == sw_ref[:, 2:])
-            rows_ref = np.isfinite(phys_ref).all(axis=1)
-            ok = bool(same and np.isfinite(phys[rows_ref]).all())
-            err = float(np.abs(_wrap(phys[rows_ref] - phys_ref[rows_ref])).max()) if ok else np.inf
-            t_err = float(np.abs(sw[: len(sw_ref), 0] - sw_ref[:, 0]).max()) if ok else np.inf
-            wall = best_time(
-                lambda: run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed, tau)
-            )
-            rows.append(
-                {
-                    "scene": label,
-                    "method": method,
-                    "locate_events": locate,
-                    "jdot": jdot,
-                    "h_ms": 20.0 / sub,
-                    "substeps_per_20ms": sub,
-                    "same_switches": ok,
-                    "max_angle_err_rad": err,
-                    "switch_time_err_s": t_err,
-                    "contact_residual_m": float(resid),
-                    "us_per_sim_s": wall / T * 1e6,
-                    "evals_per_sim_s": evals / T,
-                }
-            )
+    settings = [
+        (method, locate, jdot, sub, None)
+        for method, locate, jdot in variants
+        for sub in (SUBSTEPS if not quick else SUBSTEPS[:6])
+    ]
+    settings += [
+        (ADAPTIVE, True, "exact", sub, tol)
+        for sub in (2, 1)
+        for tol in (ADAPTIVE_TOLS if not quick else ADAPTIVE_TOLS[::3])
+    ]
+    for method, locate, jdot, sub, tol in settings:
+        opts = SimOptions(
+            integrator=method, substeps=sub, strict=False, locate_events=locate, jdot=jdot
+        )
+        if tol is not None:
+            opts = opts.replace(step_tol=tol)
+        packed = opts.packed
+        phys, ev, resid, evals = run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed, tau)
+        sw = ev[ev[:, 1] == 0]
+        same = len(sw) >= len(sw_ref) and np.all(sw[: len(sw_ref), 2:] == sw_ref[:, 2:])
+        rows_ref = np.isfinite(phys_ref).all(axis=1)
+        ok = bool(same and np.isfinite(phys[rows_ref]).all())
+        err = float(np.abs(_wrap(phys[rows_ref] - phys_ref[rows_ref])).max()) if ok else np.inf
+        t_err = float(np.abs(sw[: len(sw_ref), 0] - sw_ref[:, 0]).max()) if ok else np.inf
+        wall = best_time(
+            lambda: run_hybrid(chs, scs, q0, np.zeros(6), mode0, 0.02, n, *packed, tau)
+        )
+        rows.append(
+            {
+                "scene": label,
+                "method": method,
+                "locate_events": locate,
+                "jdot": jdot,
+                "h_ms": 20.0 / sub,
+                "substeps_per_20ms": sub,
+                "step_tol": tol,
+                "same_switches": ok,
+                "max_angle_err_rad": err,
+                "switch_time_err_s": t_err,
+                "contact_residual_m": float(resid),
+                "us_per_sim_s": wall / T * 1e6,
+                "evals_per_sim_s": evals / T,
+            }
+        )
     return rows, [(float(t), int(a), int(b)) for t, _, a, b in sw_ref], float(res_ref)
 
 
@@ -412,6 +431,17 @@ def _is_reference(row):
     )
 
 
+def _curve(row):
+    """One curve of a work-precision chart: a method over its step sizes, or the
+    error-controlled method over its tolerances at one longest step."""
+    key = tuple(
+        v for k, v in row.items() if k in ("method", "mass_matrix", "locate_events", "jdot")
+    )
+    if row.get("step_tol") is not None:
+        key += (f"tolerance sweep, steps <= {row['h_ms']:g} ms",)
+    return key
+
+
 def plot(rows_a, rows_b, rows_c, stab, path_a, path_b, path_c, path_s):
     import matplotlib
 
@@ -424,28 +454,12 @@ def plot(rows_a, rows_b, rows_c, stab, path_a, path_b, path_c, path_s):
         (rows_c, path_c, "scene (c): a walking cycle 1 -> 2 -> 3 -> 4 -> 1 -> 2 -> 3, 2.04 s"),
     ):
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-        keys = sorted(
-            {
-                tuple(
-                    v
-                    for k, v in r.items()
-                    if k in ("method", "mass_matrix", "locate_events", "jdot")
-                )
-                for r in rows
-            }
-        )
+        keys = sorted({_curve(r) for r in rows}, key=str)
         for key in keys:
             sel = [
                 r
                 for r in rows
-                if tuple(
-                    v
-                    for k, v in r.items()
-                    if k in ("method", "mass_matrix", "locate_events", "jdot")
-                )
-                == key
-                and np.isfinite(r["max_angle_err_rad"])
-                and not _is_reference(r)
+                if _curve(r) == key and np.isfinite(r["max_angle_err_rad"]) and not _is_reference(r)
             ]
             if not sel:
                 continue
@@ -498,7 +512,7 @@ def rule_choice(rows_b, rows_c):
     """The accuracy rule: the setting with the fewest evaluations per simulated second (the
     larger of the two scenes) whose link angles stay within 1e-3 rad and switch times within
     1 ms of the references in both walking scenes (b) and (c); also every setting meeting it."""
-    key = ("method", "locate_events", "jdot", "substeps_per_20ms")
+    key = ("method", "locate_events", "jdot", "substeps_per_20ms", "step_tol")
 
     def ok(r):
         return (
@@ -537,6 +551,8 @@ def _md(rows, cols):
     head = "| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n"
 
     def fmt(v):
+        if v is None:
+            return ""
         return f"{v:.3g}" if isinstance(v, float) else str(v)
 
     return head + "".join("| " + " | ".join(fmt(r[c]) for c in cols) + " |\n" for r in rows)
@@ -606,6 +622,7 @@ def main(argv=None) -> int:
                 "locate_events",
                 "jdot",
                 "h_ms",
+                "step_tol",
                 "err_b_rad",
                 "err_c_rad",
                 "switch_err_b_s",

@@ -11,6 +11,7 @@ import gymnasium
 from .model import BipedParams, ChainModel, LinkParams, chain_for, paper_biped
 from .modes import MODE_TABLE, EventCode, Mode
 from .simulator import (
+    ADAPTIVE_OPTIONS,
     DEFAULT_OPTIONS,
     FAST_OPTIONS,
     PAPER_OPTIONS,
@@ -41,6 +42,7 @@ if ENV_ID not in gymnasium.registry:
 __all__ = [
     "BipedParams",
     "ChainModel",
+    "ADAPTIVE_OPTIONS",
     "DEFAULT_OPTIONS",
     "ENV_ID",
     "Event",

@@ -143,9 +143,9 @@ class ConstrainedBipedEnv(gym.Env):
     | dt | 0.005 | 0.02 | control period [s] |
     | stop_at_switch | True | False | end a period just after a model switch |
     | start | "midstride" | "rest" | start distribution (Starting State) |
-    | integrator, substeps, impact, locate_events, jdot, strict, | None | | override one; |
-    | heel_force_includes_foot_weight | | | ``substeps`` per period (a preset keeps its |
-    | | | | substep length at any ``dt``: 2 per 5 ms) |
+    | integrator, substeps, impact, locate_events, jdot, strict, | None | | override one |
+    | heel_force_includes_foot_weight, step_tol | | | (``SimOptions``); ``substeps`` per |
+    | | | | period (a preset keeps its substep length at any ``dt``: 2 per 5 ms) |
     | params | paper_biped() | | the robot (``BipedParams``) |
     | torque_limit_nm | 150 | | action bound [N m] |
     | out_of_range | "clip" | | "clip" or "raise" |
@@ -161,7 +161,8 @@ class ConstrainedBipedEnv(gym.Env):
       paper's setting is ``task="paper"``. Changed: a preset's substeps now scale with ``dt``
       (the walking task integrates RK4 x 4 per 5 ms, the documented 1.25 ms, not x 16).
       Changed: the default preset is the stiffness-switching RK4_LIMEX x 8 per 20 ms (2.5 ms;
-      2 substeps per 5 ms), the accuracy rule's new choice, in place of RK4 x 16.
+      2 substeps per 5 ms), in place of RK4 x 16. Added: ``step_tol`` (for
+      ``integrator="rk4_limex_adaptive"``, error-controlled steps).
 
     Example:
         >>> import gymnasium as gym
@@ -187,6 +188,7 @@ class ConstrainedBipedEnv(gym.Env):
         jdot: str | None = None,
         strict: bool | None = None,
         heel_force_includes_foot_weight: bool | None = None,
+        step_tol: float | None = None,
         stop_at_switch: bool | None = None,
         torque_limit_nm: float = TORQUE_LIMIT_NM,
         out_of_range: str = "clip",
@@ -219,6 +221,7 @@ class ConstrainedBipedEnv(gym.Env):
                 jdot=jdot,
                 strict=strict,
                 heel_force_includes_foot_weight=heel_force_includes_foot_weight,
+                step_tol=step_tol,
                 stop_at_switch=settings["stop_at_switch"],
             ),
         )

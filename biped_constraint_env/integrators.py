@@ -20,6 +20,17 @@ by LIMEX instead (:func:`friction_is_stiff`); every other step is RK4, fourth or
 is made from the step's own states, so it is deterministic and the same in batched and single
 runs.
 
+RK4_LIMEX_ADAPTIVE takes the same steps, of a length chosen by error control (in
+:func:`~biped_constraint_env.simulator.nb_advance_w`): each step's error is estimated for free
+(an RK4 step: h/6 (f(y1) - k4), the gap to the third-order solution that uses the end state's
+evaluation, which the guards need anyway; a LIMEX step: the gap between its two members), a
+step whose estimate exceeds ``step_tol`` is retaken shorter, and the next step is
+``h min(4, 0.9 (tol / err)^(1/p))`` (p = 4 after RK4, 2 after LIMEX), never longer than the
+substep. So the steps are long (10 ms) in smooth motion and short only in the fast transients
+an impact starts; events are located on the accepted step's Hermite interpolant (dense
+output, one evaluation per iteration) instead of by retaking the step. The controller's next
+step is part of the state (``SimState.next_step_s``), so results are reproducible from a state.
+
 ``STABILITY_CONSTANT`` is the real-axis stability limit ``h lambda`` of each method for the
 linear damping mode ``qdd = -lambda qd``: 2 for explicit Euler and RK2, about 2.785 for RK4,
 unbounded for the semi-implicit method and LIMEX (their damping update is unconditionally
@@ -51,6 +62,9 @@ class Integrator(IntEnum):
     RK4_LIMEX = 5
     """Stiffness switching: RK4, except that a step whose point contact slips through the
     friction's stiff band near zero slip is taken by LIMEX (see :func:`friction_is_stiff`)."""
+    RK4_LIMEX_ADAPTIVE = 6
+    """RK4_LIMEX with error-controlled steps (the default): each step's error is estimated
+    at no extra evaluation and the step length chosen from it, up to the substep length."""
 
 
 _TABLEAUS: dict[Integrator, tuple[list[list[float]], list[float]]] = {
@@ -58,6 +72,10 @@ _TABLEAUS: dict[Integrator, tuple[list[list[float]], list[float]]] = {
     Integrator.SEMI_IMPLICIT: ([[0.0]], [1.0]),  # unused: handled by its own update rule
     Integrator.LIMEX: ([[0.0]], [1.0]),  # unused: handled by its own update rule
     Integrator.RK4_LIMEX: (  # RK4's, used on the non-stiff steps
+        [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+        [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
+    ),
+    Integrator.RK4_LIMEX_ADAPTIVE: (  # RK4's, used on the non-stiff steps
         [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
         [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
     ),
@@ -78,8 +96,9 @@ ORDER: dict[Integrator, int] = {
     Integrator.RK4: 4,
     Integrator.LIMEX: 2,
     Integrator.RK4_LIMEX: 4,
+    Integrator.RK4_LIMEX_ADAPTIVE: 4,
 }
-"""Global order of accuracy of each method."""
+"""Global order of accuracy of each method (at fixed steps)."""
 
 STABILITY_CONSTANT: dict[Integrator, float] = {
     Integrator.EULER: 2.0,
@@ -88,6 +107,7 @@ STABILITY_CONSTANT: dict[Integrator, float] = {
     Integrator.RK4: 2.785293563405282,
     Integrator.LIMEX: float("inf"),
     Integrator.RK4_LIMEX: 2.785293563405282,
+    Integrator.RK4_LIMEX_ADAPTIVE: 2.785293563405282,
 }
 """Largest stable h * lambda on the negative real axis (lambda: eigenvalue of M^-1 D)."""
 
@@ -98,6 +118,7 @@ EVALS_PER_STEP: dict[Integrator, int] = {
     Integrator.RK4: 4,
     Integrator.LIMEX: 3,
     Integrator.RK4_LIMEX: 4,
+    Integrator.RK4_LIMEX_ADAPTIVE: 4,
 }
 """Constrained dynamics evaluations per integration step."""
 
@@ -137,7 +158,8 @@ def tableau(method: Integrator) -> tuple[np.ndarray, np.ndarray]:
 def parse_integrator(value: str | int | Integrator) -> Integrator:
     """Integrator from its name or integer code.
 
-    Names: ``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``, ``"rk4_limex"``.
+    Names: ``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``, ``"rk4_limex"``,
+    ``"rk4_limex_adaptive"``.
     """
     if isinstance(value, str):
         try:
