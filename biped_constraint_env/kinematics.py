@@ -49,47 +49,37 @@ def nb_fk(ch, q, qd, qdd, root_y, K):
     """
     a_prev = 0.0
     w_prev = 0.0
-    al_prev = 0.0
     for i in range(N_LINKS):
         ph = a_prev + ch[i, COL_ANGLE] + q[i]
-        c = np.cos(ph)
-        sn = np.sin(ph)
         K[i, K_PHI] = ph
-        K[i, K_COS] = c
-        K[i, K_SIN] = sn
+        K[i, K_COS] = np.cos(ph)
+        K[i, K_SIN] = np.sin(ph)
         K[i, K_W] = w_prev + qd[i]
-        K[i, K_AL] = al_prev + qdd[i]
         if i == 0:
             K[0, K_OY] = root_y
             K[0, K_OZ] = 0.0
             K[0, K_VY] = 0.0
             K[0, K_VZ] = 0.0
-            K[0, K_AY] = 0.0
-            K[0, K_AZ] = 0.0
         else:
             ln = ch[i - 1, COL_NEXT]
             ry = ln * K[i - 1, K_COS]
             rz = ln * K[i - 1, K_SIN]
             wp = K[i - 1, K_W]
-            alp = K[i - 1, K_AL]
             K[i, K_OY] = K[i - 1, K_OY] + ry
             K[i, K_OZ] = K[i - 1, K_OZ] + rz
             K[i, K_VY] = K[i - 1, K_VY] - wp * rz
             K[i, K_VZ] = K[i - 1, K_VZ] + wp * ry
-            K[i, K_AY] = K[i - 1, K_AY] - alp * rz - wp * wp * ry
-            K[i, K_AZ] = K[i - 1, K_AZ] + alp * ry - wp * wp * rz
         a_prev = ph
         w_prev = K[i, K_W]
-        al_prev = K[i, K_AL]
+    nb_fk_accelerations(ch, qdd, K)
 
 
 @njit(cache=True)
 def nb_fk_accelerations(ch, qdd, K):
     """Refill only the accelerations of a table K from :func:`nb_fk` for new joint ``qdd``.
 
-    The angles, rates and positions in K are kept (no trigonometry); the acceleration entries
-    follow :func:`nb_fk`'s formulas, so the table equals ``nb_fk(ch, q, qd, qdd, root_y, K)``
-    bit for bit.
+    The angles, rates and positions in K are kept (no trigonometry); :func:`nb_fk` itself
+    ends with this pass, so the table equals ``nb_fk(ch, q, qd, qdd, root_y, K)`` bit for bit.
     """
     al_prev = 0.0
     for i in range(N_LINKS):

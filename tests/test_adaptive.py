@@ -3,8 +3,8 @@ stability beyond the explicit limits, reproducibility from a state, and its opti
 
 import numpy as np
 import pytest
-from conftest import STANCE_POSTURE, TABLE2_NM
-from test_simulator import DT, _sliding_heel_run
+from conftest import STANCE_POSTURE
+from test_simulator import DT, _sliding_heel_run, table2_periods
 
 from biped_constraint_env.hybrid import W_CNT, nb_make_work
 from biped_constraint_env.simulator import (
@@ -72,13 +72,7 @@ def test_accurate_with_steps_beyond_the_explicit_stability_limit(params, sliding
     got, sw = _sliding_heel_run(params, ADAPTIVE_OPTIONS.replace(substeps=1, strict=False))
     assert len(sw) == len(sw_ref) == 2
     assert np.abs(got - ref).max() <= 1e-3 and np.abs(sw - sw_ref).max() <= 1e-3
-    st = SimState(0.0, 1, 0, STANCE_POSTURE, np.zeros(6))
-    opts = ADAPTIVE_OPTIONS.replace(substeps=1, strict=False)
-    for _ in range(50):
-        res = step(params, st, TABLE2_NM, DT, opts)
-        st = res.state
-        if res.terminated:
-            break
+    st = table2_periods(params, ADAPTIVE_OPTIONS.replace(substeps=1))
     assert np.all(np.isfinite(st.qd)) and np.abs(st.qd).max() < 1e3
 
 
