@@ -146,8 +146,12 @@ def main(argv=None) -> int:
     for label, kw in (
         ("default, random actions (a reset and one period per episode)", {}),
         (
-            "task='paper', preset='default': 20 ms, RK4_LIMEX x 8",
+            "task='paper', preset='default': 20 ms, error-controlled RK4_LIMEX",
             {"task": "paper", "preset": "default"},
+        ),
+        (
+            "task='paper', preset='fixed_step': 20 ms, RK4_LIMEX x 8",
+            {"task": "paper", "preset": "fixed_step"},
         ),
         ("task='paper', preset='fast': 20 ms, RK2 x 4", {"task": "paper", "preset": "fast"}),
     ):

@@ -11,9 +11,9 @@ import gymnasium
 from .model import BipedParams, ChainModel, LinkParams, chain_for, paper_biped
 from .modes import MODE_TABLE, EventCode, Mode
 from .simulator import (
-    ADAPTIVE_OPTIONS,
     DEFAULT_OPTIONS,
     FAST_OPTIONS,
+    FIXED_STEP_OPTIONS,
     PAPER_OPTIONS,
     Event,
     SimOptions,
@@ -42,11 +42,11 @@ if ENV_ID not in gymnasium.registry:
 __all__ = [
     "BipedParams",
     "ChainModel",
-    "ADAPTIVE_OPTIONS",
     "DEFAULT_OPTIONS",
     "ENV_ID",
     "Event",
     "FAST_OPTIONS",
+    "FIXED_STEP_OPTIONS",
     "EventCode",
     "LinkParams",
     "MAX_EPISODE_STEPS",

@@ -139,13 +139,14 @@ class ConstrainedBipedEnv(gym.Env):
     | Parameter | Default (``task="walk"``) | ``task="paper"`` | Description (unit) |
     |-----------|---------|---------|--------------------|
     | task | "walk" | | "walk" or "paper" |
-    | preset | "default" | "paper" | "default" (RK4_LIMEX, 2.5 ms), "fast" (RK2, 5 ms), "paper" |
+    | preset | "default" | "paper" | "default" (error-controlled RK4_LIMEX), "fixed_step" |
+    | | | | (RK4_LIMEX, 2.5 ms), "fast" (RK2, 5 ms), "paper" |
     | dt | 0.005 | 0.02 | control period [s] |
     | stop_at_switch | True | False | end a period just after a model switch |
     | start | "midstride" | "rest" | start distribution (Starting State) |
     | integrator, substeps, impact, locate_events, jdot, strict, | None | | override one |
     | heel_force_includes_foot_weight, step_tol | | | (``SimOptions``); ``substeps`` per |
-    | | | | period (a preset keeps its substep length at any ``dt``: 2 per 5 ms) |
+    | | | | period (a preset keeps its longest step at any ``dt``) |
     | params | paper_biped() | | the robot (``BipedParams``) |
     | torque_limit_nm | 150 | | action bound [N m] |
     | out_of_range | "clip" | | "clip" or "raise" |
@@ -160,9 +161,9 @@ class ConstrainedBipedEnv(gym.Env):
     * v0 (unreleased, the only id): accurate physics and the walking task by default; the
       paper's setting is ``task="paper"``. Changed: a preset's substeps now scale with ``dt``
       (the walking task integrates RK4 x 4 per 5 ms, the documented 1.25 ms, not x 16).
-      Changed: the default preset is the stiffness-switching RK4_LIMEX x 8 per 20 ms (2.5 ms;
-      2 substeps per 5 ms), in place of RK4 x 16. Added: ``step_tol`` (for
-      ``integrator="rk4_limex_adaptive"``, error-controlled steps).
+      Changed: the default preset is error-controlled RK4_LIMEX (``"rk4_limex_adaptive"``,
+      ``step_tol`` 2e-4, steps up to the control period), in place of RK4 x 16; the fixed-step
+      RK4_LIMEX x 8 per 20 ms is ``preset="fixed_step"``. Added: ``step_tol``.
 
     Example:
         >>> import gymnasium as gym

@@ -79,6 +79,13 @@ MAX_LOCATE_ITERATIONS = 100
 """Safety cap on root-finding iterations (the tolerance is normally met in < 20)."""
 H_MIN_S = 1e-6
 """Smallest error-controlled step [s]: a step this short is accepted whatever its estimate."""
+RATE_ERROR_WEIGHT_S = 0.05
+"""How a rate error counts in the error-controlled step's estimate: as the angle [rad] it
+moves a link over this time [s] (or over the step, if longer). Rates matter beyond the angles
+they move: a controller observes them every period. At 5 ms control the walking network's
+outcomes on seeds 0-9 agree with those under 0.31 ms steps when the estimate per step stays
+below 2e-4 rad and 4e-3 rad/s; with rates weighted by the step alone (5 ms, 4e-2 rad/s) they do
+not (a 36th step in most episodes, a fall in one; docs/speed_accuracy.md)."""
 EVENT_STEP_FRACTION = 0.1
 """The error-controlled first step after a model switch, as a fraction of the largest step:
 an impact starts fast transients (the new contact's slip, the damped joints), which a step
@@ -135,13 +142,13 @@ class SimOptions:
             (its impact and renumbering applied), so that a controller can choose the new
             model's torques at the switch itself (event-driven control; the paper changes the
             torque at the switch). Off: the torque row of each model holds to the period's end.
-        step_tol: error tolerance of one ``"rk4_limex_adaptive"`` step (the largest estimated
-            error of an angle [rad], or of a rate [rad/s] times the step [s]); unused by the
-            fixed-step integrators (:data:`ADAPTIVE_OPTIONS`).
+        step_tol: error tolerance of one ``"rk4_limex_adaptive"`` step: the largest estimated
+            error of an angle [rad], or of a rate [rad/s] times :data:`RATE_ERROR_WEIGHT_S`
+            (50 ms; the step if longer); unused by the fixed-step integrators.
     """
 
-    integrator: str = "rk4_limex"
-    substeps: int = 8
+    integrator: str = "rk4_limex_adaptive"
+    substeps: int = 1
     impact: str = "plastic"
     locate_events: bool = True
     jdot: str = "exact"
@@ -210,17 +217,17 @@ class SimOptions:
 
 
 DEFAULT_OPTIONS = SimOptions()
-"""Defaults: RK4_LIMEX x 8 substeps per 20 ms (2.5 ms), located events, exact J-dot,
-strict checks, plastic impacts, and the heel/toe split of the flat stance foot with the foot's
-weight included (the exact ground reaction, so that F_L <= 0 agrees with the model-2
-dynamics). The integrator and substeps are the cheapest point of the accuracy study meeting
-<= 1e-3 rad and <= 1 ms switch-time error over both walking scenes (README, Speed and accuracy)."""
+"""Defaults: error-controlled RK4_LIMEX (tolerance 2e-4, steps up to the control period, 5 ms
+in the walking task), located events, exact J-dot, strict checks, plastic impacts, and the
+heel/toe split of the flat stance foot with the foot's weight included (the exact ground
+reaction, so that F_L <= 0 agrees with the model-2 dynamics). The cheapest setting of the
+accuracy study meeting <= 1e-3 rad and <= 1 ms switch-time error over both walking scenes
+(README, Speed and accuracy), at about 700 evaluations per simulated second."""
 
-ADAPTIVE_OPTIONS = DEFAULT_OPTIONS.replace(integrator="rk4_limex_adaptive", substeps=2)
-"""Error-controlled RK4_LIMEX, tolerance 2e-4, steps up to 10 ms: meets the accuracy rule in
-the study's scenes (b) and (c) at a third of the default's evaluations, but the walking task's
-outcomes need a tolerance about ten times tighter (docs/speed_accuracy.md), so it is not the
-default."""
+FIXED_STEP_OPTIONS = DEFAULT_OPTIONS.replace(integrator="rk4_limex", substeps=8)
+"""RK4_LIMEX x 8 fixed substeps per 20 ms (2.5 ms): the cheapest fixed-step setting meeting the
+accuracy rule (about 1,900 evaluations per simulated second), as accurate as the default and
+the same cost in the walking task, where the default's steps are limited to 5 ms anyway."""
 
 FAST_OPTIONS = DEFAULT_OPTIONS.replace(integrator="rk2", substeps=4)
 """RK2 x 4 substeps per 20 ms (5 ms, inside RK2's limit 2/lambda ~ 7.7 ms): about 3x cheaper;
@@ -619,12 +626,13 @@ def _step_error(S, W, hh, used, tol):
     in h^2, so conservative for the second-order result). Otherwise (an RK4 step): the
     difference between RK4 and the third-order solution of the same stages plus the
     end-state evaluation, h/6 (f(y1) - k4), with no extra evaluation (the end state is
-    evaluated anyway, for its guards). Angles count in rad, rates in rad/s times hh.
+    evaluated anyway, for its guards). Angles count in rad, rates in rad/s times the larger
+    of hh and :data:`RATE_ERROR_WEIGHT_S`.
     """
     q1 = S[S_Q1]
     qd1 = S[S_QD1]
     e = 0.0
-    w = hh
+    w = max(hh, RATE_ERROR_WEIGHT_S)
     if used == 1:
         qa = S[S_KQ][0]
         va = S[S_KV][0]

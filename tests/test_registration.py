@@ -21,9 +21,7 @@ def test_one_id_with_string_entry_points():
 
 def test_defaults_are_the_accurate_physics_and_the_walking_task():
     env = gym.make("ConstrainedBiped-v0").unwrapped
-    assert env.options == biped_constraint_env.DEFAULT_OPTIONS.replace(
-        stop_at_switch=True, substeps=2
-    )
+    assert env.options == biped_constraint_env.DEFAULT_OPTIONS.replace(stop_at_switch=True)
     assert (env.dt, env.start, env.task) == (0.005, "midstride", "walk")
     _, info = env.reset(seed=0)
     assert info["mode"] == 2
@@ -41,8 +39,10 @@ def test_paper_task_and_overrides():
     env = gym.make("ConstrainedBiped-v0", preset="fast").unwrapped
     assert (env.options.integrator, env.options.substeps, env.dt) == ("rk2", 1, 0.005)
     # a preset keeps its substep length at any control period; explicit substeps are per period
-    assert gym.make("ConstrainedBiped-v0").unwrapped.options.substeps == 2  # 2.5 ms at 5 ms
-    assert gym.make("ConstrainedBiped-v0", dt=0.007).unwrapped.options.substeps == 3  # <= 2.5 ms
+    assert gym.make("ConstrainedBiped-v0").unwrapped.options.substeps == 1  # steps <= 5 ms
+    fixed = dict(preset="fixed_step")
+    assert gym.make("ConstrainedBiped-v0", **fixed).unwrapped.options.substeps == 2  # 2.5 ms
+    assert gym.make("ConstrainedBiped-v0", dt=0.007, **fixed).unwrapped.options.substeps == 3
     assert gym.make("ConstrainedBiped-v0", substeps=5).unwrapped.options.substeps == 5
     assert set(TASKS) == {"walk", "paper"}
 

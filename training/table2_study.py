@@ -7,8 +7,9 @@ Readings searched (all combinations): the 32 per-joint sign mappings of the pape
 onto ours; sampled model-1 postures (stance foot flat, swing foot flat in the air, every
 point above the floor; the nominal posture first); the friction ratio K in {0.3, 0.5, 1.0};
 the impact option ("paper", "plastic"); the numerics ("paper": explicit Euler at 20 ms,
-switching at the sample, finite-difference J-dot, foot weight left out; "default": RK4_LIMEX x 8,
-located events, exact J-dot, foot weight included); and strict versus lenient end checks.
+switching at the sample, finite-difference J-dot, foot weight left out; "default":
+error-controlled RK4_LIMEX, located events, exact J-dot, foot weight included); and strict
+versus lenient end checks.
 Table 2 is applied as a per-model torque table, so the torque changes exactly at each model
 switch. Every option set's readings run in one batch of the compiled simulator, a Ray task
 each with ``--ray`` (training/distributed.py; the same result as the serial run). The best
