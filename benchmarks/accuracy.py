@@ -553,11 +553,11 @@ def meeting_rule(rows_b, rows_c):
     return meeting
 
 
-def rule_choice(rows_b, rows_c):
-    """The cheapest setting of each method meeting the accuracy rule (:func:`meeting_rule`),
-    cheapest first (the first is the rule's choice)."""
+def rule_choice(meeting):
+    """The cheapest setting of each method among ``meeting`` (:func:`meeting_rule`), cheapest
+    first (the first is the rule's choice)."""
     firsts, seen = [], set()
-    for r in meeting_rule(rows_b, rows_c):
+    for r in meeting:
         if (r["method"], r["locate_events"], r["jdot"]) not in seen:
             seen.add((r["method"], r["locate_events"], r["jdot"]))
             firsts.append(r)
@@ -612,12 +612,9 @@ def main(argv=None) -> int:
         args.out / "work_precision_c.png",
         args.out / "stability_map.png",
     )
-    results["rule"] = rule_choice(results["scene_b"], results["scene_c"])
-    default = [
-        r
-        for r in meeting_rule(results["scene_b"], results["scene_c"])
-        if tuple(r[k] for k in RULE_KEY) == default_key()
-    ]
+    meeting = meeting_rule(results["scene_b"], results["scene_c"])
+    results["rule"] = rule_choice(meeting)
+    default = [r for r in meeting if tuple(r[k] for k in RULE_KEY) == default_key()]
     results["default"] = {"setting": dict(zip(RULE_KEY, default_key(), strict=True))}
     results["default"]["meets_rule"] = bool(default)
     if default:

@@ -83,9 +83,10 @@ RATE_ERROR_WEIGHT_S = 0.05
 """How a rate error counts in the error-controlled step's estimate: as the angle [rad] it
 moves a link over this time [s] (or over the step, if longer). Rates matter beyond the angles
 they move: a controller observes them every period. At 5 ms control the walking network's
-outcomes on seeds 0-9 agree with those under 0.31 ms steps when the estimate per step stays
-below 2e-4 rad and 4e-3 rad/s; with rates weighted by the step alone (5 ms, 4e-2 rad/s) they do
-not (a 36th step in most episodes, a fall in one; docs/speed_accuracy.md)."""
+outcomes on seeds 0-9 agree with those under fixed 2.5 ms steps (and 0.31 ms, seeds 0 and 4)
+when the estimate per step stays below 2e-4 rad and 4e-3 rad/s; with rates weighted by the
+step alone (5 ms, 4e-2 rad/s) they do not (a 36th step in most episodes, a fall in one;
+docs/speed_accuracy.md)."""
 EVENT_STEP_FRACTION = 0.1
 """The error-controlled first step after a model switch, as a fraction of the largest step:
 an impact starts fast transients (the new contact's slip, the damped joints), which a step
