@@ -5,8 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from .jit import njit_noalloc
 from .model import N_ACTUATED
 
 TORQUE_LIMIT_NM = 150.0
@@ -64,7 +64,7 @@ def action_config(limit: float, out_of_range: str) -> np.ndarray:
     return np.array([limit, 1.0 if out_of_range == "clip" else 0.0])
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_check_torques(ACT, acfg) -> int:
     """The compiled twin of :func:`validate_actions` on float64 actions (n, 5), in place.
 

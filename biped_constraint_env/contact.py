@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
-from numba import njit
 
+from .jit import njit_noalloc
 from .kinematics import nb_jacobian_into, nb_point
 from .model import SC_HEEL5, SC_TOE5
 
@@ -55,13 +55,13 @@ OLD_STANCE_TOE = PointContact(FootEnd.TOE)
 """Model 4's contact: the old stance toe, the renumbered chain's swing toe (point E_f)."""
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_slip_sign(v_slip, eps):
     """Regularised sign of the sliding speed v_slip [m/s]: v / sqrt(v^2 + eps^2)."""
     return v_slip / np.sqrt(v_slip * v_slip + eps * eps)
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_contact_rows(K, Kp, qd, s_off, eps, fd_h, jac, jacp):
     """Rows of one point contact at offset ``s_off`` [m] on link 5.
 

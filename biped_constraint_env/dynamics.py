@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from .jit import njit_noalloc
 from .kinematics import (
     K_AL,
     K_AY,
@@ -41,7 +42,7 @@ from .model import (
 )
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_rnea_backward(ch, K, g, ext_link, ext_s, ext_fy, ext_fz, f, n):
     """Backward Newton-Euler pass over the kinematic table K of :func:`nb_fk`.
 
@@ -122,7 +123,7 @@ def nb_mass_matrix_rnea(ch, q):
     return M
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_crba(ch, K, M, tmp):
     """Fill M (6, 6) by the composite-rigid-body algorithm from the table K.
 

@@ -26,6 +26,7 @@ from numba import njit
 
 from .contact import nb_contact_rows
 from .dynamics import nb_crba, nb_mass_matrix, nb_rnea_backward
+from .jit import njit_noalloc
 from .kinematics import (
     K_COS,
     K_OY,
@@ -68,7 +69,9 @@ FC_TOE, FC_HEEL, FC_CONTACT, FC_STANCE_Y, FC_SLIP = range(5)
 N_FORCES = 5
 
 # Workspace layout (a tuple of arrays).
-W_K, W_KP, W_M, W_TMP, W_F, W_N, W_A, W_R, W_JAC, W_JACP, W_QDD, W_Z6, W_CNT, W_E, W_X = range(15)
+(W_K, W_KP, W_M, W_TMP, W_F, W_N, W_A, W_R, W_JAC, W_JACP, W_QDD, W_Z6, W_CNT, W_E, W_X, W_QP) = (
+    range(16)
+)
 
 INF = math.inf
 
@@ -86,7 +89,7 @@ G_FOOT_PULLS = int(EventCode.STANCE_FOOT_PULLS)
 @njit(cache=True)
 def nb_make_work():
     """A fresh workspace for the ``_w`` functions (zeroed views of one allocation)."""
-    buf = np.zeros(2 * 6 * NK + 36 + 24 + 12 + 6 + 49 + 7 + 12 + 12 + 6 + 6 + 1 + 6 + 18)
+    buf = np.zeros(2 * 6 * NK + 36 + 24 + 12 + 6 + 49 + 7 + 12 + 12 + 6 + 6 + 1 + 6 + 18 + 6)
     return (
         buf[0 : 6 * NK].reshape((6, NK)),  # K: forward pass at the current state
         buf[6 * NK : 12 * NK].reshape((6, NK)),  # Kp: at the previous sample (FD J-dot)
@@ -103,6 +106,7 @@ def nb_make_work():
         buf[12 * NK + 170 : 12 * NK + 171],  # count of constrained solves (cost accounting)
         buf[12 * NK + 171 : 12 * NK + 177],  # unit vector scratch (mass matrix by NE columns)
         nb_carve(buf, 12 * NK + 177, 6, 3),  # three right-hand sides (implicit friction)
+        buf[12 * NK + 195 : 12 * NK + 201],  # q at the previous sample (FD J-dot)
     )
 
 
@@ -112,13 +116,13 @@ def nb_carve(buf, start, rows, cols):
     return buf[start : start + rows * cols].reshape((rows, cols))
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_wrap(a):
     """Angle wrapped to (-pi, pi] [rad]."""
     return a - 2.0 * math.pi * math.ceil((a - math.pi) / (2.0 * math.pi))
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_lu_solve_inplace(m, x, n):
     """Solve the leading n x n block of m against x[:n] in place (LU, partial pivoting).
 
@@ -161,7 +165,7 @@ def nb_lu_solve_inplace(m, x, n):
     return umin / umax if umax > 0.0 else 0.0
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_lu_solve_multi(m, x, n, nr):
     """:func:`nb_lu_solve_inplace` for the nr right-hand sides in the columns of x[:n, :nr].
 
@@ -216,7 +220,7 @@ def nb_lu_solve(a, b):
     return x, piv
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_mass_matrix_columns_w(ch, q, W):
     """M into W[W_M] column by column, INV(q, 0, e_i, 0) (paper eq. 14), leaving W[W_K] dirty."""
     K = W[W_K]
@@ -234,7 +238,7 @@ def nb_mass_matrix_columns_w(ch, q, W):
             M[j, i] = col[j]
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_solve_mode_w(
     ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps, W, mass_rnea=False, implicit_fric=False
 ):
@@ -283,7 +287,10 @@ def nb_solve_mode_w(
     sg = 0.0
     if nc == 1:
         if jdot_fd_h > 0.0:
-            nb_fk(ch, q - jdot_fd_h * qd, z6, z6, 0.0, W[W_KP])
+            qp = W[W_QP]
+            for j in range(6):
+                qp[j] = q[j] - jdot_fd_h * qd[j]
+            nb_fk(ch, qp, z6, z6, 0.0, W[W_KP])
         gamma, sg = nb_contact_rows(K, W[W_KP], qd, sc[col], slip_eps, jdot_fd_h, jac, W[W_JACP])
         fric = sc[SC_FRICTION] * sg
         if implicit_fric and h_imp > 0.0:
@@ -300,7 +307,7 @@ def nb_solve_mode_w(
     return fn, sg, piv
 
 
-@njit(cache=True)
+@njit_noalloc
 def _slip_residual(w, v, h, s, eps, kf, P, U, Wt, Pc, Uc, Wc):
     """Residual (scaled by h) of the slip speed w at the step's end, and its f_n and sigma."""
     sigma = w / math.sqrt(w * w + eps * eps) - s
@@ -308,7 +315,7 @@ def _slip_residual(w, v, h, s, eps, kf, P, U, Wt, Pc, Uc, Wc):
     return w - v - h * (P + fn * (U - kf * sigma * Wt)), fn, sigma
 
 
-@njit(cache=True)
+@njit_noalloc
 def _solve_implicit_friction(sc, s0, n, qd, h, eps, gamma, sg, W):
     """The point-contact solve with the friction direction taken at the step's end.
 
@@ -391,7 +398,7 @@ def nb_solve_mode(ch, sc, mode, q, qd, tau6, h_imp, jdot_fd_h, slip_eps):
     return W[W_QDD].copy(), fn, sg, piv
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_foot_split(sc, f1z, n1, foot_weight):
     """Heel and toe vertical forces (F_L, F_R) [N] of a flat stance foot (paper eq. 18-19).
 
@@ -404,7 +411,7 @@ def nb_foot_split(sc, f1z, n1, foot_weight):
     return half - mom, half + mom
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd_h, W, forces, g):
     """Solve ``mode`` at (q, qd), then fill its contact forces and guards.
 
@@ -490,7 +497,7 @@ def nb_evaluate(ch, sc, mode, q, qd, tau6, root_y, iopt, fopt, fd_h):
     return W[W_QDD].copy(), forces, g, piv
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_project_w(ch, sc, mode, q, qd, W):
     """Project (q, qd) onto model ``mode``'s constraints in place.
 
@@ -540,7 +547,7 @@ def nb_project_w(ch, sc, mode, q, qd, W):
         qd[s0 + i] -= x[i] * jv / jx
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_jacobian_into_row(K, s_off, jac):
     """Point Jacobian of offset s_off on link 5 (the only link carrying point contacts)."""
     py = K[5, K_OY] + s_off * K[5, K_COS]

@@ -42,7 +42,8 @@ from __future__ import annotations
 from enum import IntEnum
 
 import numpy as np
-from numba import njit
+
+from .jit import njit_noalloc
 
 
 class Integrator(IntEnum):
@@ -135,7 +136,7 @@ at any of RK4's stage states (or when the slip changes sign among them): a fifth
 stability limit, so that the explicit steps are also accurate in the friction's fast mode."""
 
 
-@njit(cache=True)
+@njit_noalloc
 def friction_is_stiff(slip_sign: float, h: float) -> bool:
     """Whether RK4_LIMEX treats a step of h [s] at regularised slip sign s as stiff.
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .jit import njit_noalloc
 from .model import COL_ANGLE, COL_NEXT, N_LINKS, SC_HEEL0, SC_HEEL5, SC_TOE5, ChainModel
 
 # Keypoints: (link, which offset) pairs, evaluated by nb_keypoints.
@@ -39,7 +40,7 @@ K_PHI, K_COS, K_SIN, K_W, K_AL, K_OY, K_OZ, K_VY, K_VZ, K_AY, K_AZ = range(11)
 NK = 11
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_fk(ch, q, qd, qdd, root_y, K):
     """The one forward pass: fill the kinematic table K (6, NK) in place.
 
@@ -74,7 +75,7 @@ def nb_fk(ch, q, qd, qdd, root_y, K):
     nb_fk_accelerations(ch, qdd, K)
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_fk_accelerations(ch, qdd, K):
     """Refill only the accelerations of a table K from :func:`nb_fk` for new joint ``qdd``.
 
@@ -98,7 +99,7 @@ def nb_fk_accelerations(ch, qdd, K):
         al_prev = K[i, K_AL]
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_point(K, link, s):
     """(py, pz, vy, vz, ay, az) of the point at offset s [m] on ``link`` (no allocation)."""
     ry = s * K[link, K_COS]
@@ -115,7 +116,7 @@ def nb_point(K, link, s):
     )
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_jacobian_into(K, link, s, jac):
     """Fill jac (2, 6) with the point Jacobian d(point)/dq of offset s on ``link``.
 
@@ -180,7 +181,7 @@ def nb_point_jacobian(ch, q, link, s):
     return jac
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_keypoints_into(K, sc, out):
     """Fill out (9, 2) with the keypoints named in KEYPOINT_NAMES from the table K."""
     out[0, 0] = K[0, K_OY]
@@ -207,7 +208,7 @@ def nb_keypoints(ch, sc, q, root_y):
     return out
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_hip_kinematics(ch, q, qd, root_y, K):
     """(y, z, vy, vz) of the hip (joint 3) [m, m/s], using K (6, NK) as scratch.
 

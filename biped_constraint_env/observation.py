@@ -7,6 +7,7 @@ from gymnasium import spaces
 from numba import njit
 
 from .hybrid import nb_wrap
+from .jit import njit_noalloc
 from .kinematics import NK, nb_hip_kinematics
 from .model import N_LINKS
 
@@ -65,7 +66,7 @@ def _obs_bounds() -> tuple[np.ndarray, np.ndarray]:
 OBS_LOW, OBS_HIGH = _obs_bounds()
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_observe_row(chs, scs, q, qd, ist, fst, forces, obs, hip, low, high, K):
     """Fill one environment's obs (24,), clipped to [low, high], and hip (4: y, z, vy, vz).
 

@@ -16,6 +16,7 @@ from numba import njit
 
 from .actions import nb_check_torques
 from .hybrid import nb_make_work
+from .jit import njit_noalloc
 from .kinematics import NK
 from .model import N_ACTUATED, N_LINKS
 from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe, nb_observe_row
@@ -42,10 +43,23 @@ def _period_range(
     REW, FELL, lo, hi,
 ):  # fmt: skip
     """:func:`nb_env_period` for rows lo..hi-1, one workspace."""
-    W = nb_make_work()
-    S = nb_make_scratch()
-    K = np.empty((N_LINKS, NK))
-    table = np.empty((4, N_ACTUATED))  # the action holds in every model
+    _period_rows(
+        chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
+        cfg, REW, FELL, lo, hi, nb_make_work(), nb_make_scratch(), np.empty((N_LINKS, NK)),
+        np.empty((4, N_ACTUATED)),
+    )  # fmt: skip
+
+
+@njit_noalloc
+def _period_rows(
+    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    REW, FELL, lo, hi, W, S, K, table,
+):  # fmt: skip
+    """The rows' loop of :func:`_period_range`, given its workspaces.
+
+    W, S: :func:`~.hybrid.nb_make_work`, :func:`~.simulator.nb_make_scratch`; K (6, NK): the
+    observation's kinematics; table (4, 5): the torque table (the action holds in every model).
+    """
     for i in range(lo, hi):
         hip0 = HIP[i, 0]
         pos0 = nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS])

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .jit import njit_noalloc
 
 TERMINATION_NON_FINITE = "non_finite"
 TERMINATION_FALL = "fall"
@@ -28,19 +29,19 @@ def reward_config(
     return np.array([*weights, torque_limit_nm, fall], dtype=np.float64)
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_fallen(hip_z: float, cfg: np.ndarray) -> bool:
     """Whether the hip is below the fall height (never when it is off: -inf)."""
     return hip_z < cfg[CFG_FALL]
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_cycle_position(mode: int, steps: int) -> int:
     """4 * steps + (mode - 1): increases by one at every forward model switch."""
     return 4 * steps + (mode - 1)
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_reward_terms(progress_m, dt, switches, steps, alive, tau, cfg, out):
     """The reward terms of one control period, and their sum (see the env docstring, Rewards).
 

@@ -64,6 +64,7 @@ from .integrators import (
     parse_integrator,
     tableau,
 )
+from .jit import njit_alloc, njit_noalloc
 from .kinematics import KEYPOINT_NAMES, nb_keypoints
 from .model import N_ACTUATED, N_LINKS, BipedParams
 from .modes import FORCE_EVENTS, MODE_TABLE, N_GUARDS, EventCode, Mode, packed_mode_table
@@ -366,7 +367,7 @@ def nb_make_scratch():
     )
 
 
-@njit(cache=True)
+@njit_noalloc
 def _limex_step(ch, sc, mode, q, qd, tau6, h, fd, eps, W, S, mr):
     """One LIMEX step of h into S[S_Q1], S[S_QD1].
 
@@ -396,7 +397,7 @@ def _limex_step(ch, sc, mode, q, qd, tau6, h, fd, eps, W, S, mr):
         q1[j] = 2.0 * q1[j] - qa[j]
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=False):
     """One integration step of length h [s] inside ``mode``; result in S[S_Q1], S[S_QD1].
 
@@ -490,14 +491,14 @@ def nb_integrate(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b):
     return S[S_Q1].copy(), S[S_QD1].copy()
 
 
-@njit(cache=True)
+@njit_noalloc
 def _fired(g, k, ignored):
     if (ignored >> k) & 1:
         return False
     return g[k] <= 0.0 if k == 0 else g[k] < 0.0
 
 
-@njit(cache=True)
+@njit_noalloc
 def _gmin(g, mask):
     v = np.inf
     for k in range(g.shape[0]):
@@ -506,7 +507,7 @@ def _gmin(g, mask):
     return v
 
 
-@njit(cache=True)
+@njit_noalloc
 def _hermite(q0, v0, a0, q1, v1, a1, h, s, qs, vs):
     """State at s h (0 <= s <= 1) of a step (q0, v0) -> (q1, v1) of length h.
 
@@ -533,7 +534,7 @@ def _hermite(q0, v0, a0, q1, v1, a1, h, s, qs, vs):
         vs[j] = c0 * v0[j] + c1 * h * a0[j] + c2 * v1[j] + c3 * h * a1[j]
 
 
-@njit(cache=True)
+@njit_noalloc
 def nb_locate_w(ch, sc, mode, q, qd, tau6, h, mask, iopt, fopt, a, b, W, S, use_k1):
     """Earliest crossing in (0, h] of the guards in ``mask``; returns theta.
 
@@ -606,7 +607,7 @@ def nb_locate_w(ch, sc, mode, q, qd, tau6, h, mask, iopt, fopt, a, b, W, S, use_
     return hi
 
 
-@njit(cache=True)
+@njit_noalloc
 def _record(ev, nev, t, code, mfrom, mto, terminal):
     if nev < ev.shape[0]:
         ev[nev, 0] = t
@@ -618,7 +619,7 @@ def _record(ev, nev, t, code, mfrom, mto, terminal):
     return nev
 
 
-@njit(cache=True)
+@njit_noalloc
 def _step_error(S, W, hh, used, tol):
     """Error estimate of the step of hh [s] just taken, relative to tol (accept when <= 1).
 
@@ -649,7 +650,7 @@ def _step_error(S, W, hh, used, tol):
     return e / tol
 
 
-@njit(cache=True)
+@njit_noalloc
 def _first_step(fst, h_nom, adaptive):
     """The period's first step: the controller's carried proposal, else h_nom."""
     if fst.shape[0] < N_FST:
@@ -657,7 +658,7 @@ def _first_step(fst, h_nom, adaptive):
     return min(fst[FS_H], h_nom) if adaptive and fst[FS_H] > 0.0 else h_nom
 
 
-@njit(cache=True)
+@njit_noalloc
 def _finite(q, qd):
     for j in range(6):
         if not (np.isfinite(q[j]) and np.isfinite(qd[j])):
@@ -665,7 +666,7 @@ def _finite(q, qd):
     return True
 
 
-@njit(cache=True)
+@njit_noalloc
 def _step_length(left, h_try, h_nom):
     """The error-controlled step [s] with ``left`` [s] to the period's end.
 
@@ -677,7 +678,7 @@ def _step_length(left, h_try, h_nom):
     return left
 
 
-@njit(cache=True)
+@njit_noalloc
 def _next_step(err, hh, h_try, h_nom, used):
     """(accepted, next step [s]) after a step of hh [s] with relative error estimate err.
 
@@ -695,7 +696,33 @@ def _next_step(err, hh, h_try, h_nom, used):
     return True, min(h_nom, hh * fac)
 
 
-@njit(cache=True)
+@njit_alloc
+def _reset_map(chs, scs, side, reset, q, qd, root_y, iopt):
+    """The reset map of a model switch, in place on (q, qd): (heel behind, side, root_y).
+
+    ``reset`` 1 (touchdown of the swing heel): if the swing heel is behind the stance toe the
+    switch is refused (returns True: the run ends); else the impact. ``reset`` 2 (the swing
+    foot lands flat): the impact, then the renumbering (paper eq. 25-29), which swaps ``side``
+    and moves ``root_y`` to the new stance toe. Allocates, so it is kept out of the
+    reference-count-free stepping loop (module jit), which calls it only at switches.
+    """
+    ch = chs[side]
+    sc = scs[side]
+    if reset == 1:
+        heel_y = nb_keypoints(ch, sc, q, root_y)[7, 0]
+        if heel_y < root_y:
+            return True, side, root_y
+        qd[:] = nb_impact(ch, sc, 1, q, qd, iopt[IO_IMPACT])
+    elif reset == 2:
+        qd[:] = nb_impact(ch, sc, 2, q, qd, iopt[IO_IMPACT])
+        qn, qdn, root_y = nb_renumber(ch, chs[1 - side], sc, q, qd, root_y)
+        q[:] = qn
+        qd[:] = qdn
+        side = 1 - side
+    return False, side, root_y
+
+
+@njit_noalloc
 def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces, W, S):
     """Advance one simulator by one control period dt [s], in place.
 
@@ -820,20 +847,11 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
         # ---- handle event k at time t, state (q, qd)
         if k == 0:
             succ = SUCCESSOR[mode]
-            reset = RESET[mode]
-            if reset == 1:
-                heel_y = nb_keypoints(ch, sc, q, root_y)[7, 0]
-                if heel_y < root_y:
-                    nev = _record(ev, nev, t, 9, mode, mode, 1)
-                    status = 1
-                    break
-                qd[:] = nb_impact(ch, sc, 1, q, qd, iopt[IO_IMPACT])
-            elif reset == 2:
-                qd[:] = nb_impact(ch, sc, 2, q, qd, iopt[IO_IMPACT])
-                qn, qdn, root_y = nb_renumber(ch, chs[1 - side], sc, q, qd, root_y)
-                q[:] = qn
-                qd[:] = qdn
-                side = 1 - side
+            behind, side, root_y = _reset_map(chs, scs, side, RESET[mode], q, qd, root_y, iopt)
+            if behind:
+                nev = _record(ev, nev, t, 9, mode, mode, 1)
+                status = 1
+                break
             nev = _record(ev, nev, t, 0, mode, succ, 0)
             if mode == 4:
                 steps += 1
@@ -906,8 +924,17 @@ def _advance_range(
     chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, lo, hi
 ):
     """:func:`nb_advance_w` over rows lo..hi-1 with one workspace; rows with STATUS != 0 skip."""
-    W = nb_make_work()
-    S = nb_make_scratch()
+    _advance_rows(
+        chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, lo, hi,
+        nb_make_work(), nb_make_scratch(),
+    )  # fmt: skip
+
+
+@njit_noalloc
+def _advance_rows(
+    chs, scs, Q, QD, IST, FST, TAU, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, lo, hi, W, S
+):
+    """The rows' loop of :func:`_advance_range`, given its workspace and scratch."""
     for i in range(lo, hi):
         if STATUS[i] != 0:
             NEV[i] = 0

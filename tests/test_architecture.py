@@ -1,7 +1,7 @@
-"""One direction of dependency: model -> kinematics -> dynamics -> contact -> modes -> hybrid
--> simulator -> (the env's parts: tasks, actions, starts, rewards, observation) -> period (their
-compiled control period) -> env -> vector_env. Each module may import only modules of lower or
-equal rank."""
+"""One direction of dependency: jit (how the core is compiled) -> model -> kinematics -> dynamics
+-> contact -> modes -> hybrid -> simulator -> (the env's parts: tasks, actions, starts, rewards,
+observation) -> period (their compiled control period) -> env -> vector_env. Each module may
+import only modules of lower or equal rank."""
 
 import ast
 from pathlib import Path
@@ -11,6 +11,7 @@ import pytest
 import biped_constraint_env
 
 LAYERS = [
+    "jit",
     "units",
     "planar",
     "integrators",
