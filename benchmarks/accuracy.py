@@ -38,6 +38,7 @@ from biped_constraint_env.model import paper_biped
 from biped_constraint_env.simulator import (
     DEFAULT_OPTIONS,
     MAX_EVENTS,
+    N_FST,
     S_Q1,
     S_QD1,
     SimOptions,
@@ -102,7 +103,7 @@ def run_hybrid(chs, scs, q0, qd0, mode0, dt, n, iopt, fopt, a, b, tau):
     q = q0.copy()
     qd = qd0.copy()
     ist = np.array([mode0, 0, 0, 0])
-    fst = np.zeros(3)
+    fst = np.zeros(N_FST)
     ev = np.zeros((MAX_EVENTS, 5))
     forces = np.zeros(5)
     phys = np.full((n + 1, 6), np.nan)

@@ -25,6 +25,7 @@ from biped_constraint_env.simulator import (
     DEFAULT_OPTIONS,
     FAST_OPTIONS,
     MAX_EVENTS,
+    N_FST,
     SimState,
     nb_advance,
     nb_advance_batch,
@@ -144,7 +145,7 @@ def _control_steps(params, opts, chs, scs, q0, ev, forces, args, dt, t_eval):
     ):
         table = np.tile(torque, (4, 1))
         qq, vv = q0.copy(), np.zeros(6)
-        ist, fst = np.array([1, 0, 0, 0], np.int64), np.zeros(3)
+        ist, fst = np.array([1, 0, 0, 0], np.int64), np.zeros(N_FST)
 
         def compiled():
             qq[:] = q0
@@ -160,7 +161,7 @@ def _control_steps(params, opts, chs, scs, q0, ev, forces, args, dt, t_eval):
         Q = np.tile(q0, (n_b, 1))
         QD = np.zeros((n_b, 6))
         IST = np.tile(np.array([1, 0, 0, 0], np.int64), (n_b, 1))
-        FST = np.zeros((n_b, 3))
+        FST = np.zeros((n_b, N_FST))
         TAU = np.tile(table, (n_b, 1, 1))
         EV = np.zeros((n_b, MAX_EVENTS, 5))
         FO = np.zeros((n_b, 5))

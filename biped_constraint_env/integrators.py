@@ -68,23 +68,20 @@ class Integrator(IntEnum):
     at no extra evaluation and the step length chosen from it, up to the substep length."""
 
 
+_RK4_TABLEAU = (
+    [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
+    [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
+)
+_RK4_STABILITY = 2.785293563405282
+
 _TABLEAUS: dict[Integrator, tuple[list[list[float]], list[float]]] = {
     Integrator.EULER: ([[0.0]], [1.0]),
     Integrator.SEMI_IMPLICIT: ([[0.0]], [1.0]),  # unused: handled by its own update rule
     Integrator.LIMEX: ([[0.0]], [1.0]),  # unused: handled by its own update rule
-    Integrator.RK4_LIMEX: (  # RK4's, used on the non-stiff steps
-        [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
-        [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
-    ),
-    Integrator.RK4_LIMEX_ADAPTIVE: (  # RK4's, used on the non-stiff steps
-        [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
-        [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
-    ),
+    Integrator.RK4_LIMEX: _RK4_TABLEAU,  # used on the non-stiff steps
+    Integrator.RK4_LIMEX_ADAPTIVE: _RK4_TABLEAU,  # used on the non-stiff steps
     Integrator.RK2: ([[0.0, 0.0], [0.5, 0.0]], [0.0, 1.0]),
-    Integrator.RK4: (
-        [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0], [0.0, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]],
-        [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0],
-    ),
+    Integrator.RK4: _RK4_TABLEAU,
 }
 
 MAX_STAGES = 4
@@ -105,10 +102,10 @@ STABILITY_CONSTANT: dict[Integrator, float] = {
     Integrator.EULER: 2.0,
     Integrator.SEMI_IMPLICIT: float("inf"),
     Integrator.RK2: 2.0,
-    Integrator.RK4: 2.785293563405282,
+    Integrator.RK4: _RK4_STABILITY,
     Integrator.LIMEX: float("inf"),
-    Integrator.RK4_LIMEX: 2.785293563405282,
-    Integrator.RK4_LIMEX_ADAPTIVE: 2.785293563405282,
+    Integrator.RK4_LIMEX: _RK4_STABILITY,
+    Integrator.RK4_LIMEX_ADAPTIVE: _RK4_STABILITY,
 }
 """Largest stable h * lambda on the negative real axis (lambda: eigenvalue of M^-1 D)."""
 

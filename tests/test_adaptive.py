@@ -12,6 +12,7 @@ from biped_constraint_env.simulator import (
     FIXED_STEP_OPTIONS,
     FS_H,
     MAX_EVENTS,
+    N_FST,
     SimArrays,
     SimOptions,
     SimState,
@@ -37,7 +38,7 @@ def _evaluations(params, options, T=0.3):
     chs, scs = params.packed
     iopt, fopt, a, b = options.packed
     q, qd = scene_b_start(params), np.zeros(6)
-    ist, fst = np.array([2, 0, 0, 0], np.int64), np.zeros(3)
+    ist, fst = np.array([2, 0, 0, 0], np.int64), np.zeros(N_FST)
     W, S = nb_make_work(), nb_make_scratch()
     ev, forces = np.zeros((MAX_EVENTS, 5)), np.zeros(5)
     for _ in range(int(round(T / DT))):
