@@ -8,9 +8,12 @@ import numpy as np
 
 from .jit import njit_noalloc
 from .model import N_ACTUATED
+from .validation import check_choice, check_real
 
 TORQUE_LIMIT_NM = 150.0
 """Default action bound [N m] (>= 120 so that Table 2 fits)."""
+TORQUE_LIMIT_MIN_NM, TORQUE_LIMIT_MAX_NM = 1e-3, 1e6
+"""Accepted range of ``torque_limit_nm`` [N m] (the control cost divides by its square)."""
 
 
 def validate_actions(actions: Any, limit: float, out_of_range: str) -> np.ndarray:
@@ -48,15 +51,10 @@ def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
 
 def check_action_settings(torque_limit_nm: float, out_of_range: str) -> tuple[float, str]:
     """The validated torque limit [N m] and out-of-range policy of an env."""
-    if not (
-        isinstance(torque_limit_nm, (int, float))
-        and np.isfinite(torque_limit_nm)
-        and torque_limit_nm > 0
-    ):
-        raise ValueError(f"torque_limit_nm must be finite and > 0, got {torque_limit_nm!r}")
-    if out_of_range not in ("clip", "raise"):
-        raise ValueError(f"out_of_range must be 'clip' or 'raise', got {out_of_range!r}")
-    return float(torque_limit_nm), out_of_range
+    limit = check_real(
+        "torque_limit_nm", torque_limit_nm, TORQUE_LIMIT_MIN_NM, TORQUE_LIMIT_MAX_NM, unit=" [N m]"
+    )
+    return limit, check_choice("out_of_range", out_of_range, ("clip", "raise"))
 
 
 def action_config(limit: float, out_of_range: str) -> np.ndarray:

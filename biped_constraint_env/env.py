@@ -7,6 +7,7 @@ settings in :mod:`.tasks`, all shared with the batched :mod:`.vector_env`.
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import gymnasium as gym
@@ -32,11 +33,11 @@ from .starts import (
     RESET_NOISE_SCALE_RAD,
     check_start_settings,
     check_start_state,
-    sample_start,
-    start_sampled,
+    draw_starts,
     state_from_options,
 )
 from .tasks import resolve_options, resolve_task
+from .validation import check_names
 
 
 class ConstrainedBipedEnv(gym.Env):
@@ -203,8 +204,10 @@ class ConstrainedBipedEnv(gym.Env):
         posture=NOMINAL_POSTURE_RAD,
         start: str | None = None,
         render_mode: str | None = None,
+        **unknown: Any,
     ):
         """Create the environment (see the class docstring, Arguments)."""
+        check_names("argument(s) of ConstrainedBiped-v0", unknown, ENV_ARGUMENTS)
         self.params = params if params is not None else paper_biped()
         self.task = task
         settings = resolve_task(
@@ -257,6 +260,7 @@ class ConstrainedBipedEnv(gym.Env):
         )
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
+        self._needs_reset = True  # until a reset succeeds, and again after a termination
 
     # ---------------------------------------------------------------- state access
     @property
@@ -272,17 +276,18 @@ class ConstrainedBipedEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode (see the class docstring, Starting State)."""
         super().reset(seed=seed)
-        if options:
+        self._needs_reset = True  # stays so if this reset is refused
+        if options is not None and not (isinstance(options, dict) and not options):
             state = state_from_options(options)
             check_start_state(self.params, state)
             forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
             self._sim.set(0, state, forces)
         else:
-            q, qd, mode = sample_start(
-                self.np_random, self.start, self.posture, self.reset_noise_scale
-            )
-            self._sim.q[0], self._sim.qd[0] = q, qd
-            start_sampled(self.params, self.options, self._sim, np.zeros(1, np.int64), mode)
+            draw_starts(
+                self.params, self.options, self._sim, np.zeros(1, np.int64), [self.np_random],
+                self.start, self.posture, self.reset_noise_scale,
+            )  # fmt: skip
+        self._needs_reset = False
         self._observe()
         info = self._info((), (0.0,) * len(REWARD_TERMS), None)
         if self.render_mode == "human":
@@ -294,9 +299,12 @@ class ConstrainedBipedEnv(gym.Env):
         a = action if isinstance(action, np.ndarray) else np.asarray(action)
         buf = self._buf
         sim = buf.sim
-        if a.shape != (N_ACTUATED,) or a.dtype.kind not in "fiu" or sim.status[0] != 0:
+        if self._needs_reset or a.shape != (N_ACTUATED,) or a.dtype.kind not in "fiu":
+            if self._needs_reset:
+                raise RuntimeError(
+                    "step() called before reset() or after the episode ended; call reset()"
+                )
             validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises if invalid
-            raise RuntimeError("step() called after the episode ended; call reset()")
         buf.act[0] = a  # as float64; checked (and clipped) in the compiled period
         if buf.period():
             validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises its ValueError
@@ -312,6 +320,8 @@ class ConstrainedBipedEnv(gym.Env):
             reason = TERMINATION_FALL
         *terms, reward = buf.rew[0].tolist()
         info = self._info(events, terms, reason)
+        if reason is not None:
+            self._needs_reset = True
         if self.render_mode == "human":
             self.render()
         return buf.obs[0].copy(), reward, reason is not None, False, info
@@ -369,3 +379,12 @@ class ConstrainedBipedEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+ENV_ARGUMENTS: tuple[str, ...] = tuple(
+    name
+    for name, p in inspect.signature(ConstrainedBipedEnv.__init__).parameters.items()
+    if name != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD
+)
+"""The keyword arguments of ``gym.make("ConstrainedBiped-v0", ...)`` (a misspelt one raises a
+ValueError listing these)."""

@@ -146,7 +146,8 @@ class EnvBuffers:
     ``sim`` (:class:`~.simulator.SimArrays`), ``act`` (n, 5) the actions [N m], ``obs``
     (n, 24), ``hip`` (n, 4: hip y, z, vy, vz), ``rew`` (n, 6: the reward terms and their sum)
     and ``fell`` (n,). :meth:`period` runs :func:`nb_env_period` on them; batches of at least
-    ``PARALLEL_MIN_BATCH`` use numba's threads (:func:`nb_env_period_parallel`).
+    ``PARALLEL_MIN_BATCH`` rows given ``num_threads`` > 1 are split among that many numba
+    threads (:func:`nb_env_period_parallel`).
 
     The arrays are this object's own, allocated once, so their numba types never change: the
     kernels are compiled (or loaded from the cache) for those types at construction, and a
@@ -154,10 +155,21 @@ class EnvBuffers:
     per-call type dispatch (about 1 us of a 20 us ``env.step``).
     """
 
-    def __init__(self, n: int, params, options, dt: float, cfg: np.ndarray, acfg: np.ndarray):
+    def __init__(
+        self,
+        n: int,
+        params,
+        options,
+        dt: float,
+        cfg: np.ndarray,
+        acfg: np.ndarray,
+        num_threads: int = 1,
+    ):
         """Allocate for ``n`` environments of a robot, physics, period [s] and settings.
 
-        ``cfg``: :func:`~.rewards.reward_config`; ``acfg``: :func:`~.actions.action_config`.
+        ``cfg``: :func:`~.rewards.reward_config`; ``acfg``: :func:`~.actions.action_config`;
+        ``num_threads``: numba threads that step a batch of at least ``PARALLEL_MIN_BATCH``
+        rows (1: serial).
         """
         self.sim = SimArrays(n)
         self.act = np.zeros((n, N_ACTUATED))
@@ -172,7 +184,8 @@ class EnvBuffers:
             chs, scs, s.q, s.qd, s.ist, s.fst, self.act, float(dt), iopt, fopt, a, b, s.events,
             s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell, acfg,
         )  # fmt: skip
-        self._parallel = n >= PARALLEL_MIN_BATCH
+        self.num_threads = int(num_threads)
+        self._parallel = n >= PARALLEL_MIN_BATCH and self.num_threads > 1
         self._observe_args = (
             chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self.obs, self.hip, OBS_LOW, OBS_HIGH,
         )  # fmt: skip
@@ -200,8 +213,8 @@ class EnvBuffers:
         Checks (and clips) the torques, then advances every running row, observes and rewards
         every row.
         """
-        if self._parallel and numba.get_num_threads() > 1:
-            return self._threaded(*self._args, numba.get_num_threads())
+        if self._parallel:
+            return self._threaded(*self._args, self.num_threads)
         return self._serial(*self._args)
 
     def observe(self) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .jit import njit_noalloc
+from .validation import check_real
 
 TERMINATION_NON_FINITE = "non_finite"
 TERMINATION_FALL = "fall"
@@ -12,6 +13,9 @@ TERMINATION_FALL = "fall"
 REWARD_TERMS = ("reward_forward", "reward_alive", "reward_switch", "reward_step", "reward_ctrl")
 """Names of the reward terms in ``info`` (their sum is the reward)."""
 
+
+REWARD_WEIGHT_MAX = 1e6
+"""Largest accepted reward weight."""
 
 CFG_FORWARD, CFG_ALIVE, CFG_SWITCH, CFG_STEP, CFG_CTRL, CFG_LIMIT, CFG_FALL = range(7)
 """Entries of :func:`reward_config`'s array."""
@@ -68,7 +72,7 @@ def nb_reward_terms(progress_m, dt, switches, steps, alive, tau, cfg, out):
 def reward_weights(
     forward: float, alive: float, switch: float, step: float, ctrl: float
 ) -> tuple[float, ...]:
-    """The validated reward weights (each a finite number >= 0), in REWARD_TERMS order."""
+    """The validated reward weights (each in [0, REWARD_WEIGHT_MAX]), in REWARD_TERMS order."""
     names = (
         "forward_reward_weight",
         "alive_bonus",
@@ -77,18 +81,13 @@ def reward_weights(
         "ctrl_cost_weight",
     )
     values = (forward, alive, switch, step, ctrl)
-    for name, v in zip(names, values, strict=True):
-        if not (isinstance(v, (int, float)) and np.isfinite(v) and v >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
-    return tuple(float(v) for v in values)
+    return tuple(
+        check_real(n, v, 0.0, REWARD_WEIGHT_MAX) for n, v in zip(names, values, strict=True)
+    )
 
 
 def check_fall_height(fall_hip_height_m) -> float | None:
     """The validated fall height [m] (None: off)."""
     if fall_hip_height_m is None:
         return None
-    if not (isinstance(fall_hip_height_m, (int, float)) and np.isfinite(fall_hip_height_m)):
-        raise ValueError(
-            f"fall_hip_height_m must be a finite number or None, got {fall_hip_height_m!r}"
-        )
-    return float(fall_hip_height_m)
+    return check_real("fall_hip_height_m", fall_hip_height_m, -10.0, 10.0, unit=" [m]")

@@ -68,6 +68,7 @@ from .jit import njit_alloc, njit_noalloc
 from .kinematics import KEYPOINT_NAMES, nb_keypoints
 from .model import N_ACTUATED, N_LINKS, BipedParams
 from .modes import FORCE_EVENTS, MODE_TABLE, N_GUARDS, EventCode, Mode, packed_mode_table
+from .validation import check_bool, check_choice, check_int, check_real
 
 MAX_EVENTS = 16
 """Capacity of the per-control-period event buffer."""
@@ -79,7 +80,10 @@ STATUS_OK, STATUS_TERMINATED, STATUS_NONFINITE = 0, 1, 2
 MAX_LOCATE_ITERATIONS = 100
 """Safety cap on root-finding iterations (the tolerance is normally met in < 20)."""
 H_MIN_S = 1e-6
-"""Smallest error-controlled step [s]: a step this short is accepted whatever its estimate."""
+"""Smallest error-controlled step [s]: a step this short is accepted whatever its estimate,
+and no step is proposed shorter (so that a period takes at most about dt / H_MIN_S steps)."""
+STEP_TOL_MIN = 1e-10
+"""Smallest accepted ``step_tol`` (below it every step would be H_MIN_S anyway)."""
 RATE_ERROR_WEIGHT_S = 0.05
 """How a rate error counts in the error-controlled step's estimate: as the angle [rad] it
 moves a link over this time [s] (or over the step, if longer). Rates matter beyond the angles
@@ -114,6 +118,17 @@ class SimulationError(RuntimeError):
         super().__init__(message)
         self.state = state
         self.tau = tau
+
+
+MAX_SUBSTEPS = 100_000
+"""Most integration steps per control period (``substeps``): 50 ns steps in a 5 ms period."""
+_REAL_OPTION_RANGES = {
+    "slip_eps_mps": (0.0, 1.0),
+    "pos_tol_m": (0.0, 1e-2),
+    "time_tol_s": (0.0, 1e-2),
+    "step_tol": (STEP_TOL_MIN, 1.0),
+}
+"""Accepted ranges of the real-valued options (the lower bound excluded when it is 0)."""
 
 
 @dataclass(frozen=True)
@@ -166,26 +181,25 @@ class SimOptions:
     step_tol: float = 2e-4
 
     def __post_init__(self) -> None:
-        """Validate every option."""
+        """Validate every option (a ``ValueError`` names the option)."""
+        if isinstance(self.integrator, (bool, float)):
+            raise ValueError(f"integrator must be a name or an Integrator, got {self.integrator!r}")
         parse_integrator(self.integrator)
-        if isinstance(self.substeps, bool) or not isinstance(self.substeps, (int, np.integer)):
-            raise ValueError(f"substeps must be an int >= 1, got {self.substeps!r}")
-        if self.substeps < 1:
-            raise ValueError(f"substeps must be >= 1, got {self.substeps!r}")
-        if self.impact not in ("paper", "plastic"):
-            raise ValueError(f"impact must be 'paper' or 'plastic', got {self.impact!r}")
-        if self.jdot not in ("exact", "finite_difference"):
-            raise ValueError(f"jdot must be 'exact' or 'finite_difference', got {self.jdot!r}")
-        for name in ("slip_eps_mps", "pos_tol_m", "time_tol_s", "step_tol"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
-        if self.mass_matrix not in ("crba", "newton_euler_columns"):
-            raise ValueError(
-                f"mass_matrix must be 'crba' or 'newton_euler_columns', got {self.mass_matrix!r}"
-            )
-        if not isinstance(self.max_switches, (int, np.integer)) or self.max_switches < 1:
-            raise ValueError(f"max_switches must be an int >= 1, got {self.max_switches!r}")
+        check_int("substeps", self.substeps, 1, MAX_SUBSTEPS)
+        check_choice("impact", self.impact, ("paper", "plastic"))
+        check_choice("jdot", self.jdot, ("exact", "finite_difference"))
+        for name in (
+            "locate_events",
+            "strict",
+            "heel_force_includes_foot_weight",
+            "project_constraints",
+            "stop_at_switch",
+        ):
+            check_bool(name, getattr(self, name))
+        for name, (low, high) in _REAL_OPTION_RANGES.items():
+            check_real(name, getattr(self, name), low, high, low_open=low == 0.0)
+        check_choice("mass_matrix", self.mass_matrix, ("crba", "newton_euler_columns"))
+        check_int("max_switches", self.max_switches, 1, 1000)
 
     @functools.cached_property
     def packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -684,7 +698,8 @@ def _next_step(err, hh, h_try, h_nom, used):
 
     Rejected (err > 1, NaN included, unless hh is already H_MIN_S): retake shorter, by
     0.9 err^(-1/p) but at least 0.2. Accepted: the next step grows by at most 4, up to h_nom;
-    a step cut short by the period's end only ever shrinks the proposal.
+    a step cut short by the period's end only ever shrinks the proposal; never below H_MIN_S
+    (a step accepted at H_MIN_S with a large estimate would otherwise propose ever shorter ones).
     """
     expo = 0.5 if used == 1 else 0.25
     if not err <= 1.0 and hh > H_MIN_S:
@@ -692,8 +707,8 @@ def _next_step(err, hh, h_try, h_nom, used):
         return False, max(hh * (r if r >= 0.2 else 0.2), H_MIN_S)
     fac = 4.0 if err <= 0.0 else min(4.0, 0.9 * err**-expo)
     if hh < h_try:
-        return True, (min(h_try, hh * fac) if fac < 1.0 else h_try)
-    return True, min(h_nom, hh * fac)
+        return True, max(min(h_try, hh * fac) if fac < 1.0 else h_try, H_MIN_S)
+    return True, max(min(h_nom, hh * fac), H_MIN_S)
 
 
 @njit_alloc

@@ -10,6 +10,7 @@ import numpy as np
 from .model import N_LINKS, BipedParams
 from .modes import Mode
 from .simulator import SimArrays, SimOptions, SimState, keypoints, nb_start_batch
+from .validation import check_array, check_choice, check_int, check_mapping, check_real
 
 NOMINAL_POSTURE_RAD = (0.0, -0.1, 0.1, -0.3, -0.4, 0.7)
 """Nominal model-1 posture q (theta0, q1..q5) [rad]: stance leg upright, swing leg back and
@@ -22,6 +23,10 @@ STARTS = ("rest", "midstride")
 """Values of the env's ``start`` argument."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
+MAX_RESET_NOISE_RAD = 1.0
+"""Largest accepted ``reset_noise_scale`` [rad]."""
+MAX_START_DRAWS = 100
+"""Draws a reset makes for a start above the ground before it gives up (large noise)."""
 POSITION_TOLERANCE_M = 1e-9
 """Penetration accepted when validating a reset state [m]."""
 
@@ -82,24 +87,39 @@ def sample_start(
     return q, qd, int(Mode.TOE_PIVOT)
 
 
-def start_sampled(
+def draw_starts(
     params: BipedParams,
     options: SimOptions,
     sim: SimArrays,
     idx: np.ndarray,
-    modes: np.ndarray | None = None,
+    rngs: list[np.random.Generator],
+    start: str,
+    posture: np.ndarray,
+    noise_scale: float,
 ) -> None:
-    """Start slots ``idx`` (q and qd already sampled) in ``modes`` (default: model 1).
+    """Sample and start slots ``idx``, slot ``idx[k]`` drawing from ``rngs[k]``.
 
-    Leg A stands, its toe at y = 0. Raises ValueError if a sampled posture puts a point below
-    the ground.
+    Each slot's (q, qd, mode) comes from :func:`sample_start`; leg A stands, its toe at y = 0.
+    A draw that puts a point below the ground (large ``noise_scale``) is drawn again from the
+    same generator, up to :data:`MAX_START_DRAWS` times, so that a batched env's automatic
+    reset never fails a whole batch step and the single env draws the same starts. Raises
+    ValueError, naming ``reset_noise_scale``, if a slot finds no valid start.
     """
-    low = start_slots(params, options, sim, idx, modes)
-    if low.min() < -POSITION_TOLERANCE_M:
-        raise ValueError(
-            f"a sampled start posture is below the ground (lowest z {low.min():.3g} m); "
-            "reduce reset_noise_scale or change the posture"
-        )
+    idx = np.asarray(idx, np.int64)
+    todo = np.arange(idx.shape[0])
+    modes = np.empty(idx.shape[0], np.int64)
+    for _ in range(MAX_START_DRAWS):
+        for k in todo:
+            i = idx[k]
+            sim.q[i], sim.qd[i], modes[k] = sample_start(rngs[k], start, posture, noise_scale)
+        low = start_slots(params, options, sim, idx[todo], modes[todo])
+        todo = todo[low < -POSITION_TOLERANCE_M]
+        if todo.size == 0:
+            return
+    raise ValueError(
+        f"no start above the ground in {MAX_START_DRAWS} draws (lowest z {low.min():.3g} m): "
+        f"reset_noise_scale={noise_scale!r} is too large for the {start!r} start"
+    )
 
 
 def start_slots(
@@ -109,7 +129,7 @@ def start_slots(
     idx: np.ndarray,
     modes: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Start slots ``idx`` as :func:`start_sampled` does; returns each one's lowest point z [m].
+    """Start slots ``idx`` (q, qd set) in ``modes``; returns each one's lowest point z [m].
 
     For searches that score a start below the ground instead of refusing it.
     """
@@ -135,43 +155,58 @@ def start_slots(
     )
 
 
-def state_from_options(options: dict[str, Any]) -> SimState:
-    """A SimState from ``reset(options=...)`` keys q, qd, mode, stance_side, root_y."""
-    unknown = set(options) - {"q", "qd", "mode", "stance_side", "root_y"}
-    if unknown:
-        raise ValueError(f"unknown reset option(s) {sorted(unknown)}")
+RESET_OPTION_KEYS = ("q", "qd", "mode", "stance_side", "root_y")
+"""Keys of ``reset(options=...)``."""
+MAX_RESET_RATE_RAD_S = 1e3
+"""Largest joint rate accepted in ``reset(options=...)`` [rad/s] (the observation's bound)."""
+MAX_RESET_ANGLE_RAD = 100.0
+"""Largest joint angle accepted in ``reset(options=...)`` or as a posture [rad]."""
+
+
+def state_from_options(options: Any) -> SimState:
+    """A SimState from ``reset(options=...)`` keys q, qd, mode, stance_side, root_y.
+
+    ValueError, naming the key, on an unknown key, a wrong type, shape or range.
+    """
+    check_mapping("reset option(s)", options, RESET_OPTION_KEYS)
     if "q" not in options:
         raise ValueError("reset options must contain 'q' (theta0, q1..q5) [rad]")
-    mode = options.get("mode", 1)
-    if mode not in (1, 2, 3, 4):
-        raise ValueError(f"mode must be one of 1, 2, 3, 4, got {mode!r}")
     return SimState(
         t=0.0,
-        mode=Mode(int(mode)),
-        stance_side=int(options.get("stance_side", 0)),
-        q=np.asarray(options["q"], dtype=np.float64),
-        qd=np.asarray(options.get("qd", np.zeros(N_LINKS)), dtype=np.float64),
-        root_y=float(options.get("root_y", 0.0)),
+        mode=Mode(check_int("mode", options.get("mode", 1), 1, 4)),
+        stance_side=check_int("stance_side", options.get("stance_side", 0), 0, 1),
+        q=check_array("q", options["q"], (N_LINKS,), MAX_RESET_ANGLE_RAD, " [rad]"),
+        qd=check_array(
+            "qd",
+            options.get("qd", np.zeros(N_LINKS)),
+            (N_LINKS,),
+            MAX_RESET_RATE_RAD_S,
+            " [rad/s]",
+        ),  # fmt: skip
+        root_y=check_real("root_y", options.get("root_y", 0.0), -1e6, 1e6, unit=" [m]"),
     )
 
 
 def check_start_state(params: BipedParams, state: SimState) -> None:
-    """ValueError unless ``state`` is inside its model (points above ground, contacts held)."""
+    """ValueError unless ``state`` is inside its model (points above ground, contacts held).
+
+    The message names the reset options at fault (q, qd, mode).
+    """
     pts = keypoints(params, state)
-    low = {k: v[1] for k, v in pts.items() if v[1] < -POSITION_TOLERANCE_M}
+    low = {k: round(float(v[1]), 6) for k, v in pts.items() if v[1] < -POSITION_TOLERANCE_M}
     if low:
-        raise ValueError(f"reset state puts points below the ground (z [m]): {low}")
+        raise ValueError(f"q puts points below the ground (z [m]): {low}")
     mode = state.mode
     if mode in (Mode.FOOT_FLAT, Mode.DOUBLE_SUPPORT) and (state.q[0] != 0 or state.qd[0] != 0):
         raise ValueError(
-            f"model {int(mode)} holds the stance foot flat: theta0 and its rate must be 0"
+            f"mode {int(mode)} holds the stance foot flat: q[0] (theta0) and qd[0] must be 0"
         )
     if mode in (Mode.TOE_PIVOT, Mode.TOE_HEEL) and state.q[0] > 0:
-        raise ValueError("models 2-3 pivot on the stance toe: theta0 must be <= 0 (heel up)")
+        raise ValueError(f"mode {int(mode)} pivots on the stance toe: q[0] (theta0) must be <= 0")
     for m, name in ((Mode.TOE_HEEL, "swing_heel"), (Mode.DOUBLE_SUPPORT, "swing_toe")):
         if mode == m and abs(pts[name][1]) > 1e-6:
             raise ValueError(
-                f"model {int(m)} holds the {name} at z = 0, got z = {pts[name][1]:.3g} m"
+                f"mode {int(m)} holds the {name} at z = 0, but q puts it at {pts[name][1]:.3g} m"
             )
 
 
@@ -179,18 +214,15 @@ def check_start_settings(
     params: BipedParams, start: str, posture, reset_noise_scale: float
 ) -> tuple[str, np.ndarray, float]:
     """The validated start kind, rest posture (6,) [rad] and noise scale [rad] of an env."""
-    if start not in STARTS:
-        raise ValueError(f"start must be one of {STARTS}, got {start!r}")
-    if not (
-        isinstance(reset_noise_scale, (int, float))
-        and np.isfinite(reset_noise_scale)
-        and reset_noise_scale >= 0
-    ):
-        raise ValueError(
-            f"reset_noise_scale must be a finite number >= 0, got {reset_noise_scale!r}"
-        )
-    q = np.asarray(posture, dtype=np.float64)
-    if q.shape != (N_LINKS,):
-        raise ValueError(f"posture must have shape ({N_LINKS},), got {q.shape}")
-    check_start_state(params, SimState(0.0, 1, 0, q, np.zeros(N_LINKS)))
-    return start, q, float(reset_noise_scale)
+    if not isinstance(params, BipedParams):
+        raise ValueError(f"params must be a BipedParams (e.g. paper_biped()), got {params!r}")
+    check_choice("start", start, STARTS)
+    noise = check_real(
+        "reset_noise_scale", reset_noise_scale, 0.0, MAX_RESET_NOISE_RAD, unit=" [rad]"
+    )
+    q = check_array("posture", posture, (N_LINKS,), MAX_RESET_ANGLE_RAD, " [rad]")
+    try:
+        check_start_state(params, SimState(0.0, 1, 0, q, np.zeros(N_LINKS)))
+    except ValueError as e:
+        raise ValueError(f"posture (a model-1 rest state): {e}") from None
+    return start, q, noise

@@ -10,8 +10,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
-
 from .simulator import (
     DEFAULT_OPTIONS,
     FAST_OPTIONS,
@@ -20,6 +18,7 @@ from .simulator import (
     SimOptions,
 )
 from .units import PAPER_SAMPLE_TIME_S
+from .validation import check_choice, check_real
 
 PRESETS: dict[str, SimOptions] = {
     "default": DEFAULT_OPTIONS,
@@ -48,10 +47,13 @@ MAX_EPISODE_STEPS = 6000
 """Time limit in control periods at registration (6000 x 5 ms = 30 s of the walking task)."""
 
 
+MAX_DT_S = 1.0
+"""Longest control period accepted [s] (the paper's is 20 ms)."""
+
+
 def resolve_task(task: str, **overrides: Any) -> dict[str, Any]:
     """The task's settings with the explicitly given ones (not None) on top."""
-    if task not in TASKS:
-        raise ValueError(f"task must be one of {sorted(TASKS)}, got {task!r}")
+    check_choice("task", task, sorted(TASKS))
     return {**TASKS[task], **{k: v for k, v in overrides.items() if v is not None}}
 
 
@@ -63,10 +65,8 @@ def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOpt
     x 2 per 5 ms, 2.5 ms substeps; the default's x 1 per 20 ms is x 1 per 5 ms). An explicit
     ``substeps`` is per period, as given.
     """
-    if preset not in PRESETS:
-        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
-    if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a finite number > 0 [s], got {dt!r}")
+    check_choice("preset", preset, sorted(PRESETS))
+    dt = check_real("dt", dt, 0.0, MAX_DT_S, low_open=True, unit=" [s]")
     base = PRESETS[preset]
     changes = {k: v for k, v in overrides.items() if v is not None}
     if "substeps" not in changes:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -23,8 +24,12 @@ from .model import N_ACTUATED
 from .period import EnvBuffers
 from .rewards import REWARD_TERMS, TERMINATION_FALL, TERMINATION_NON_FINITE, reward_config
 from .simulator import STATUS_NONFINITE, evaluate
-from .starts import check_start_state, sample_start, start_sampled, state_from_options
+from .starts import check_start_state, draw_starts, state_from_options
 from .tasks import MAX_EPISODE_STEPS
+from .validation import check_int
+
+MAX_NUM_ENVS = 1_000_000
+"""Largest accepted ``num_envs``."""
 
 _MASK_KEYS = tuple(
     f"_{k}"
@@ -39,7 +44,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     Args:
         num_envs: number of sub-environments.
-        max_episode_steps: truncation after this many control periods (registration: 6000).
+        max_episode_steps: truncation after this many control periods (registration: 6000;
+            None: never).
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` (Gymnasium's default) or ``SAME_STEP``
             (a finished sub-environment is reset within the same step; its last observation
             is in ``info["final_obs"]`` and its last info in ``info["final_info"]``, as
@@ -54,15 +60,23 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         num_envs: int = 1,
         max_episode_steps: int | None = MAX_EPISODE_STEPS,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        num_threads: int = 1,
         **kwargs: Any,
     ):
         """Create the batch; the single env validates the arguments."""
         if kwargs.get("render_mode") is not None:
             raise ValueError("the batched vector env does not render; use gym.make for that")
         kwargs.pop("render_mode", None)
-        if not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs must be an int >= 1, got {num_envs!r}")
-        autoreset_mode = AutoresetMode(autoreset_mode)
+        num_envs = check_int("num_envs", num_envs, 1, MAX_NUM_ENVS)
+        if max_episode_steps is not None:
+            max_episode_steps = check_int("max_episode_steps", max_episode_steps, 1, 2**62)
+        num_threads = check_int("num_threads", num_threads, 1, numba.config.NUMBA_NUM_THREADS)
+        try:
+            autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(
+                f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {autoreset_mode!r}"
+            ) from None
         if autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {autoreset_mode}")
         self.metadata = {**self.metadata, "autoreset_mode": autoreset_mode}
@@ -84,8 +98,11 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self.dt,
             reward_config(p.weights, p.torque_limit_nm, p.fall_hip_height_m),
             action_config(p.torque_limit_nm, p.out_of_range),
+            num_threads,
         )
+        self.num_threads = num_threads
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
+        self._needs_reset = True  # until the first reset succeeds
         self._elapsed = np.zeros(num_envs, np.int64)
         self._autoreset = np.zeros(num_envs, bool)
         self._rngs: list[np.random.Generator] = [
@@ -95,17 +112,15 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def _reset_slots(self, idx: np.ndarray) -> None:
         """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
         p = self._proto
-        s = self._sim
-        modes = np.empty(len(idx), np.int64)
-        for k, i in enumerate(idx):
-            s.q[i], s.qd[i], modes[k] = sample_start(
-                self._rngs[i], p.start, p.posture, p.reset_noise_scale
-            )
-        start_sampled(self.params, self.options, s, idx, modes)
+        draw_starts(
+            self.params, self.options, self._sim, idx, [self._rngs[i] for i in idx], p.start,
+            p.posture, p.reset_noise_scale,
+        )  # fmt: skip
         self._elapsed[idx] = 0
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-environment; ``seed`` s seeds sub-environment i with s + i."""
+        self._needs_reset = True  # stays so if this reset is refused
         if seed is not None:
             seeds = (
                 [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
@@ -113,7 +128,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"expected {self.num_envs} seeds, got {len(seeds)}")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        if options:
+        if options is not None and not (isinstance(options, dict) and not options):
             state = state_from_options(options)
             check_start_state(self.params, state)
             for i in range(self.num_envs):
@@ -126,10 +141,13 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._autoreset[:] = False
         self._fell = np.zeros(self.num_envs, bool)
         self._observe()
+        self._needs_reset = False
         return self._obs.copy(), self._infos(np.zeros(self.num_envs), None)
 
     def step(self, actions):
         """Step every sub-environment (autoreset on the step after an episode ends)."""
+        if self._needs_reset:
+            raise RuntimeError("step() called before reset(); call reset()")
         actions = np.asarray(actions)
         if actions.shape != (self.num_envs, N_ACTUATED):
             raise ValueError(

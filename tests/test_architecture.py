@@ -1,7 +1,7 @@
-"""One direction of dependency: jit (how the core is compiled) -> model -> kinematics -> dynamics
--> contact -> modes -> hybrid -> simulator -> (the env's parts: tasks, actions, starts, rewards,
-observation) -> period (their compiled control period) -> env -> vector_env. Each module may
-import only modules of lower or equal rank."""
+"""One direction of dependency: jit (how the core is compiled) and validation (argument
+checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> simulator -> (the
+env's parts: tasks, actions, starts, rewards, observation) -> period (their compiled control
+period) -> env -> vector_env. Each module may import only modules of lower or equal rank."""
 
 import ast
 from pathlib import Path
@@ -12,6 +12,7 @@ import biped_constraint_env
 
 LAYERS = [
     "jit",
+    "validation",
     "units",
     "planar",
     "integrators",
