@@ -5,13 +5,15 @@
 Both envs are driven the same way: ``gym.make`` (default wrappers), a fixed sequence of
 seeded random actions scaled to 5% of the action bound, reset on termination/truncation
 (reset time included). Prints us per env.step, and env-steps/s of the batched vector env
-against Walker2d-v5's ``make_vec(..., vectorization_mode="sync")``, with the ratios. Every
+against Walker2d-v5's ``make_vec(..., vectorization_mode="sync")``, with the ratios (the
+batched env on ``--env-threads`` numba threads, all cores by default: the env alone in the
+process; and once on one thread, the env's default). Every
 timing runs ``--rounds`` times, interleaved with the others; each figure is its best round
 (the machine's slow spells only ever add time).
 
 Random torques end a walking-task episode in its first period (the stance toe pulls off the
 ground), so those rows time a reset and one terminated period per episode. The "walking" rows
-replay the actions the model controller (``training/controllers/teacher_robust.json``) gave,
+replay the actions the model controller (``model:teacher_robust``) gave,
 recorded before the timing from the same seeds: the env walks the same way again (the simulator
 is deterministic) and no reset is timed. They time ``env.step`` as it is used.
 """
@@ -19,6 +21,7 @@ is deterministic) and no reset is timed. They time ``env.step`` as it is used.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import gymnasium as gym
@@ -34,7 +37,7 @@ def walking_actions(n: int, seed: int = 0) -> np.ndarray:
     from training.model_controller import controller_from
 
     env = gym.make("ConstrainedBiped-v0", max_episode_steps=n + 1)
-    ctl = controller_from("model:training/controllers/teacher_robust.json")
+    ctl = controller_from("model:teacher_robust")
     obs, _ = env.reset(seed=seed)
     acts = np.empty((n, 5), np.float32)
     for k in range(n):
@@ -56,7 +59,7 @@ def walking_actions_batched(n: int, num_envs: int, seed: int = 0) -> np.ndarray:
         vectorization_mode="vector_entry_point",
         max_episode_steps=n + 1,
     )
-    ctl = controller_from("model:training/controllers/teacher_robust.json")
+    ctl = controller_from("model:teacher_robust")
     obs, _ = venv.reset(seed=seed)
     acts = np.empty((n, num_envs, 5), np.float32)
     for k in range(n):
@@ -128,8 +131,20 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--rounds", type=int, default=5, help="interleaved rounds; each figure is the best"
     )
+    ap.add_argument(
+        "--env-threads",
+        type=int,
+        default=os.cpu_count(),
+        help="numba threads of the batched env (num_threads; the env's default is 1)",
+    )
     args = ap.parse_args(argv)
+    for module in ("mujoco", "imageio"):  # Walker2d-v5, checked before any timing
+        try:
+            __import__(module)
+        except ImportError:
+            ap.error(f"{module} is missing: the benchmark needs pip install -e '.[bench]'")
     env_id = "ConstrainedBiped-v0"
+    threads = {"num_threads": args.env_threads}
     n_vec = max(args.steps // args.num_envs, 20)
     acts = walking_actions(args.steps)
     acts_b = walking_actions_batched(n_vec * 4, args.num_envs)
@@ -138,7 +153,14 @@ def main(argv=None) -> int:
             lambda: per_step_us("Walker2d-v5", args.steps),
             lambda: vec_steps_per_s("Walker2d-v5", args.num_envs, "sync", n_vec),
         ),
-        "default, walking (a controller's recorded actions, no resets)": (
+        f"default, walking (a controller's recorded actions, no resets), batched on "
+        f"{args.env_threads} threads": (
+            lambda: per_step_us(env_id, args.steps, acts=acts),
+            lambda: vec_steps_per_s(
+                env_id, args.num_envs, "vector_entry_point", 0, acts=acts_b, **threads
+            ),
+        ),
+        "default, walking, batched on 1 thread (the env's default num_threads)": (
             lambda: per_step_us(env_id, args.steps, acts=acts),
             lambda: vec_steps_per_s(env_id, args.num_envs, "vector_entry_point", 0, acts=acts_b),
         ),
@@ -158,7 +180,7 @@ def main(argv=None) -> int:
         rows[label] = (
             lambda kw=kw: per_step_us(env_id, args.steps, **kw),
             lambda kw=kw: vec_steps_per_s(
-                env_id, args.num_envs, "vector_entry_point", n_vec * 4, **kw
+                env_id, args.num_envs, "vector_entry_point", n_vec * 4, **kw, **threads
             ),
         )
     best = {label: [np.inf, 0.0] for label in rows}

@@ -52,7 +52,7 @@ class ConstrainedBipedEnv(gym.Env):
     the Newton-Euler method with the contacts as constraints (README, Model). One walking step
     is the cycle 1 -> 2 -> 3 -> 4 -> 1; the legs swap roles at 3 -> 4. The agent applies the
     five joint torques and should walk forward (+y) as far as it can without leaving the four
-    models. Conventions (angles, signs) are those of MODEL.md and the README.
+    models. Conventions (angles, signs): docs/conventions.md.
 
     ## Action Space
     ``Box(-torque_limit_nm, torque_limit_nm, (5,), float32)``, torques in N m, held over
@@ -79,7 +79,7 @@ class ConstrainedBipedEnv(gym.Env):
 
     | Num | quantity | min | max | unit |
     |-----|----------|-----|-----|------|
-    | 0-5 | theta0, q1..q5 (MODEL.md coordinates, current numbering), wrapped | -pi | pi | rad |
+    | 0-5 | theta0, q1..q5 (docs/conventions.md, current numbering), wrapped | -pi | pi | rad |
     | 6-11 | their rates | -1e3 | 1e3 | rad/s |
     | 12 | hip y relative to the stance toe | -10 | 10 | m |
     | 13 | hip height z | -10 | 10 | m |
@@ -114,8 +114,8 @@ class ConstrainedBipedEnv(gym.Env):
     model 1, leg A standing at rest in ``posture`` (default ``NOMINAL_POSTURE_RAD``). Both add
     uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` (0.01 rad) to q1..q5; the
     stance toe is at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
-    starts from any state in MODEL.md's coordinates (validated: points on or above the ground,
-    model constraints satisfied; a ``ValueError`` says what is wrong).
+    starts from any state in the coordinates of docs/conventions.md (validated: points on or
+    above the ground, model constraints satisfied; a ``ValueError`` names what is wrong).
 
     ## Episode End
     ### Termination

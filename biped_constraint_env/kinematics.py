@@ -1,6 +1,6 @@
 """Planar forward kinematics: ONE forward pass serves every point, Jacobian and J-dot q-dot.
 
-Conventions (MODEL.md): y forward, z up, angles counter-clockwise about +x. The chain is
+Conventions (docs/conventions.md): y forward, z up, angles counter-clockwise about +x. The chain is
 rooted at the stance toe P = (root_y, 0). Link i has absolute direction
 ``phi_i = phi_{i-1} + offset_i + q_i`` (offsets 0, pi/2, 0, pi, 0, pi/2), its joint i at
 ``o_i``, and ``o_{i+1} = o_i + next_i * u(phi_i)`` with ``u(a) = (cos a, sin a)``. A point of
@@ -237,7 +237,7 @@ def _link_offset(link: int, s: float) -> tuple[int, float]:
 
 
 def link_angles(q: np.ndarray) -> np.ndarray:
-    """(6,) absolute link directions phi_i [rad] (MODEL.md) for joint angles q (6,) [rad]."""
+    """(6,) absolute link directions phi_i [rad] (docs/conventions.md) for angles q (6,) [rad]."""
     q = _vec6("q", q)
     offsets = np.array([0.0, 0.5 * np.pi, 0.0, np.pi, 0.0, 0.5 * np.pi])
     return np.cumsum(offsets + q)

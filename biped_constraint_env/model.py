@@ -1,6 +1,6 @@
 """Model parameters: frozen, validated, SI units (paper Table 1).
 
-The biped is a planar serial chain of six uniform rods (MODEL.md):
+The biped is a planar serial chain of six uniform rods (docs/conventions.md):
 
 ====  ==============  =====================================================
 link  name            geometry (chain rooted at the stance toe)

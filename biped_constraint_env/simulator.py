@@ -277,7 +277,7 @@ class SimState:
         t: simulated time [s].
         mode: current paper model (1-4).
         stance_side: which physical leg stands (0 = leg A, the paper's numbering; 1 = leg B).
-        q: (6,) joint angles (theta0, q1..q5) [rad] in the current numbering (MODEL.md).
+        q: (6,) joint angles (theta0, q1..q5) [rad] in the current numbering (docs/conventions.md).
         qd: (6,) joint rates [rad/s].
         root_y: world y of the chain root, the stance toe [m].
         steps_completed: completed walking steps (cycles 1->2->3->4->1).
@@ -1049,8 +1049,9 @@ def step(
     Args:
         params: the robot.
         state: the current state.
-        tau: (5,) joint torques [N m] (MODEL.md signs, current numbering), held over dt; or
-            (4, 5), one row per model (the torque switches with the model, as in Table 2).
+        tau: (5,) joint torques [N m] (signs of docs/conventions.md, current numbering), held
+            over dt; or (4, 5), one row per model (the torque switches with the model, as in
+            Table 2).
         dt: control period [s], > 0.
         options: numerics and modelling options.
 

@@ -15,7 +15,7 @@ PAPER_SAMPLE_TIME_S = 0.020
 """The paper's sampling time [s] (paper, section 4)."""
 
 HALF_PI_RAD = 0.5 * math.pi
-"""Angle offset between a foot (heel -> toe) and its shank [rad] (MODEL.md conventions)."""
+"""Angle offset between a foot (heel -> toe) and its shank [rad] (docs/conventions.md)."""
 
 PI_RAD = math.pi
 """Angle offset between the stance thigh (knee -> hip) and the swing thigh (hip -> knee) [rad]."""

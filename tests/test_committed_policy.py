@@ -1,28 +1,43 @@
-"""The committed learned walker (policies/ppo_walker): the network alone loads, is deterministic
-and walks."""
+"""The committed learned walker (policies/ppo_walker): the network alone loads without
+unpickling anything, is deterministic and walks."""
 
 from __future__ import annotations
 
+import pickle
+import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 POLICY = Path(__file__).resolve().parents[1] / "policies" / "ppo_walker"
+
+
+class _Payload:
+    """Unpickling this runs code: it writes a marker file."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.write_text, (self.marker, "pwned"))
 
 
 def test_committed_walker_is_a_network_alone_and_deterministic():
     import torch
 
-    from training.evaluate import load, policy_actor, run_episodes
     from training.imitation import FixedNormalizer
+    from training.policy_io import load_policy, policy_actor
+    from training.rollouts import run_episodes
 
     torch.set_num_threads(1)
-    model, vecnorm, cfg = load(POLICY, "final")
+    policy, norm, cfg, state = load_policy(POLICY, "final")
     assert cfg.env_id == "ConstrainedBiped-v0" and cfg.base_controller == ""  # no controller
     assert cfg.env_kwargs()["task"] == "walk" and cfg.env_kwargs()["preset"] == "default"
-    assert isinstance(model.policy.features_extractor, FixedNormalizer)
-    assert not vecnorm.norm_obs  # the network normalises its own input
-    actor = policy_actor(model, vecnorm, cfg)
+    assert isinstance(policy.features_extractor, FixedNormalizer)
+    assert not norm.enabled  # the network normalises its own input
+    assert state["num_timesteps"] > 0
+    actor = policy_actor(policy, norm, cfg)
     obs = np.zeros(24)
     obs[18] = 1.0
     np.testing.assert_array_equal(actor(obs), actor(obs))
@@ -30,3 +45,38 @@ def test_committed_walker_is_a_network_alone_and_deterministic():
     (ep,) = run_episodes(actor, cfg.env_kwargs(), [0], cfg.env_id)
     assert ep["steps_completed"] >= 10, ep
     assert ep["distance_m"] > 5.0
+
+
+def test_loading_a_policy_never_unpickles(monkeypatch, tmp_path):
+    """A planted pickle payload in a policy directory is never run, and no loader unpickles."""
+    from training.policy_io import load_policy
+
+    run = tmp_path / "downloaded_policy"
+    shutil.copytree(POLICY, run, ignore=shutil.ignore_patterns("figures"))
+    marker = tmp_path / "marker"
+    for name in ("vecnormalize.pkl", "final/vecnormalize.pkl", "model.zip"):
+        (run / name).write_bytes(pickle.dumps(_Payload(marker)))
+
+    def refuse(*_a, **_k):
+        raise AssertionError("a policy loader unpickled")
+
+    monkeypatch.setattr(pickle, "load", refuse)
+    monkeypatch.setattr(pickle, "loads", refuse)
+    monkeypatch.setattr(pickle, "Unpickler", refuse)
+    for which in ("final", "imitation"):
+        load_policy(run, which)
+    assert not marker.exists()
+
+
+def test_a_truncated_snapshot_is_not_taken_for_a_policy(tmp_path):
+    from training.policy_io import STATE_FILE, find_snapshot, load_policy
+
+    run = tmp_path / "run"
+    shutil.copytree(POLICY, run, ignore=shutil.ignore_patterns("figures"))
+    (run / "final" / STATE_FILE).unlink()  # killed before the snapshot was complete
+    with pytest.raises(FileNotFoundError, match="has: \\['imitation'\\]"):
+        find_snapshot(run, "final")
+    (run / "final").rename(run / "final.tmp")
+    shutil.copytree(POLICY / "final", run / "final.prev")  # the kept previous snapshot
+    assert find_snapshot(run, "final") == run / "final.prev"
+    load_policy(run, "final")

@@ -123,7 +123,31 @@ def test_sweep_runs_two_trials_to_completion(tmp_path):
     assert [r["seed"] for r in rows] == ["0", "1"]
     for r in rows:
         assert float(r["steps_mean"]) >= 0 and float(r["train_wall_s"]) > 0
-        assert (Path(r["run_dir"]) / "model.zip").is_file()  # the trial's checkpoint
+        assert (Path(r["run_dir"]) / "final" / "policy.safetensors").is_file()  # its checkpoint
+
+
+@pytest.mark.slow
+def test_readme_sweep_command_runs_every_trial(tmp_path):
+    """The README's sweep command, as written (from the repository root, where the config's
+    teacher gains are found), with a small budget added by --set."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text()
+    command = "python -m training.sweep --config training/configs/ppo_walker.toml --seeds 0 1 2"
+    assert command in readme
+    small = ["bc_episodes0=1", "bc_periods0=40", "bc_rounds=0", "bc_grad_steps=20"]
+    small += ["total_timesteps=256", "n_envs=2", "n_steps=128", "batch_size=64", "n_epochs=1"]
+    small += ["eval_freq=100000", "checkpoint_freq=100000"]
+    argv = [sys.executable, *command.split()[1:], "--set", *small]
+    argv += ["--eval-episodes", "1", "--num-cpus", "2", "--out-dir", str(tmp_path)]
+    proc = subprocess.run(argv, cwd=root, capture_output=True, text=True, timeout=1800)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    with open(tmp_path / "sweep_ppo_walker" / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["seed"] for r in rows] == ["0", "1", "2"]
+    assert all("error" not in r or not r["error"] for r in rows), rows
 
 
 @pytest.mark.slow

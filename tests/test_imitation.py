@@ -102,7 +102,7 @@ def test_gear_same_in_the_batched_and_the_single_sb3_env():
 
 
 def test_push_changes_the_hip_velocity_and_keeps_the_contacts():
-    from training.evaluate import PUSH_HIP_DV_M_S, push
+    from training.rollouts import PUSH_HIP_DV_M_S, push
 
     env = gym.make("ConstrainedBiped-v0")
     obs, info = env.reset(seed=0)
@@ -130,14 +130,16 @@ def test_train_ppo_with_teacher_smoke(tmp_path):
     )
     assert rc == 0
     (run,) = (tmp_path / "train_ppo").iterdir()
-    assert (run / "imitation" / "model.zip").is_file() and (run / "imitation.csv").is_file()
-    from stable_baselines3 import PPO
+    assert (run / "imitation" / "policy.safetensors").is_file()
+    assert (run / "imitation.csv").is_file()
+    from training.policy_io import load_policy, load_state
 
-    model = PPO.load(run / "model.zip", device="cpu")
-    assert isinstance(model.policy.features_extractor, imitation.FixedNormalizer)
-    std = model.policy.log_std.exp().detach().numpy() * GEAR
+    policy, _, cfg, state = load_policy(run)
+    assert isinstance(policy.features_extractor, imitation.FixedNormalizer)
+    std = policy.log_std.exp().detach().numpy() * GEAR
     assert std == pytest.approx(np.full(5, 0.3), rel=0.2)  # action_std_nm, per joint in N m
     assert (run / "imitation" / "demos.npz").is_file()  # the anchor's data, for a resume
+    assert state["num_timesteps"] >= 256
     rc = train_ppo.main(["--resume", str(run), "--total-timesteps", "384", "--progress", "false"])
     assert rc == 0
-    assert PPO.load(run / "model.zip", device="cpu").num_timesteps >= 384
+    assert load_state(run / "final")["num_timesteps"] >= 384

@@ -144,28 +144,44 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
         "config.toml",
         "command.txt",
         "versions.json",
-        "model.zip",
-        "vecnormalize.pkl",
-        "monitor.csv",
+        "final/policy.safetensors",
+        "final/normalizer.npz",
+        "final/state.json",
+        "0.monitor.csv",
         "eval.csv",
-        "checkpoints/model.zip",
-        "checkpoints/vecnormalize.pkl",
-        "best/model.zip",
+        "checkpoints/latest/optimizer.safetensors",
+        "checkpoints/latest/state.json",
+        "best/policy.safetensors",
         "figures/learning_curve.png",
     ):
         assert (run / name).exists(), name
+    assert not list(run.glob("**/*.pkl")) and not list(run.glob("**/*.zip"))  # nothing pickled
     assert any((run / "tb").iterdir())
-    # resume continues the step count from the checkpoint
+    # a resume with a new total continues the step count from the checkpoint
     rc = train_ppo.main(["--resume", str(run), "--total-timesteps", "768", "--progress", "false"])
     assert rc == 0
-    from stable_baselines3 import PPO
+    from training.policy_io import load_state
 
-    assert PPO.load(run / "model.zip", device="cpu").num_timesteps >= 768
+    assert load_state(run / "final")["num_timesteps"] >= 768
+    assert (run / "512.monitor.csv").is_file()  # the resumed session's own monitor
     assert evaluate.main([str(run), "--episodes", "2"]) == 0
     summary = json.loads((run / "evaluation.json").read_text())
     (policy,) = summary["results"]
     assert summary["seeds"] == [0, 1] and len(policy["episodes"]) == 2
     assert (run / "figures" / "best.gif").is_file()
+
+
+def test_train_ppo_help_explains_every_setting(capsys):
+    from training import train_ppo
+    from training.common import field_help
+    from training.ppo_config import PPOConfig
+
+    helps = field_help(PPOConfig)
+    assert all(helps[f.name] for f in dataclasses.fields(PPOConfig)), helps
+    with pytest.raises(SystemExit):
+        train_ppo.main(["--help"])
+    out = capsys.readouterr().out
+    assert "DAgger rounds" in out and "(default: 0.0003)" in out
 
 
 def test_table2_study_smoke(tmp_path):
@@ -231,3 +247,23 @@ def test_optimised_midstride_table_documented_step_count():
     out = open_loop.run(dataclasses.replace(cfg, gif=False, progress=False), record_frames=False)
     assert out["steps_completed"] == 1 and out["end_reason"] == "step_behind_stance_toe"
     assert 1.2 < out["distance_m"] < 1.3
+
+
+def test_sweep_without_ray_says_what_to_install(monkeypatch, capsys):
+    import sys
+
+    from training import sweep
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
+    with pytest.raises(SystemExit):
+        sweep.main(["--config", "training/configs/ppo_scratch.toml"])
+    assert ".[distributed]" in capsys.readouterr().err
+
+
+def test_teacher_gains_are_found_from_any_directory(monkeypatch, tmp_path):
+    from training.model_controller import controller_from
+
+    monkeypatch.chdir(tmp_path)  # e.g. a Ray Tune trial's own directory
+    controller_from("model:teacher_robust")
+    with pytest.raises(ValueError, match="teacher_robust"):
+        controller_from("model:no_such_gains")

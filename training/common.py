@@ -42,25 +42,56 @@ def _coerce(kind: Any, value: Any, name: str) -> Any:
     return kind(value)
 
 
-def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> C:
-    """Build ``cls`` from defaults, an optional TOML file and CLI flags (in that precedence)."""
+def field_help(cls: type) -> dict[str, str]:
+    """Each field's help text: the comment after its definition (and comment lines below it).
+
+    The dataclass source is the one place a setting is documented; ``--help`` shows it.
+    """
+    import inspect
+    import re
+
+    out: dict[str, str] = {}
+    current = None
+    for line in inspect.getsource(cls).splitlines():
+        m = re.match(r"\s{4}(\w+): [^=]+=[^#]*(#\s*(.*))?$", line)
+        if m:
+            current = m.group(1)
+            out[current] = (m.group(3) or "").strip()
+        elif current and re.match(r"\s{4}#", line):
+            out[current] = (out[current] + " " + line.strip().lstrip("#").strip()).strip()
+        else:
+            current = None
+    return out
+
+
+def _parser(cls: type, description: str) -> argparse.ArgumentParser:
     hints = get_type_hints(cls)
+    helps = field_help(cls)
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--config", type=Path, help="TOML file of field = value pairs")
     for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
         kind = hints[f.name]
+        text = f"{helps.get(f.name, '')} (default: {f.default})".strip()
         if getattr(kind, "__origin__", None) is tuple:
-            parser.add_argument(flag, nargs="+", default=None, help=f"(default {f.default})")
+            parser.add_argument(flag, nargs="+", default=None, help=text, metavar="V")
         elif kind is bool:  # a bare flag means true; "--flag false" still reads
             parser.add_argument(
-                flag, nargs="?", const="true", default=None, help=f"(default {f.default})"
+                flag, nargs="?", const="true", default=None, help=text, metavar="BOOL"
             )
         else:
-            parser.add_argument(flag, default=None, help=f"(default {f.default})")
-    args = parser.parse_args(argv)
+            parser.add_argument(flag, default=None, help=text, metavar="V")
+    return parser
+
+
+def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> C:
+    """Build ``cls`` from defaults, an optional TOML file and CLI flags (in that precedence)."""
+    hints = get_type_hints(cls)
+    args = _parser(cls, description).parse_args(argv)
     values: dict[str, Any] = {}
     if args.config is not None:
+        if not args.config.is_file():
+            raise SystemExit(f"--config: no such file {args.config}")
         with open(args.config, "rb") as fh:
             data = tomllib.load(fh)
         unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
@@ -73,6 +104,12 @@ def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> 
             values[f.name] = v
     kwargs = {k: _coerce(hints[k], v, k) for k, v in values.items()}
     return cls(**kwargs)
+
+
+def given_flags(cls: type, argv: Sequence[str] | None) -> set[str]:
+    """The fields set by a flag on the command line (not by default or by a config file)."""
+    args = _parser(cls, "").parse_args(argv)
+    return {f.name for f in dataclasses.fields(cls) if getattr(args, f.name) is not None}
 
 
 def to_toml(cfg: Any) -> str:

@@ -300,15 +300,30 @@ class ModelController:
         return tau
 
 
+CONTROLLERS_DIR = Path(__file__).resolve().parent / "controllers"
+"""The shipped gain sets (``"model:NAME"`` names ``CONTROLLERS_DIR/NAME.json``)."""
+
+
 def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelController:
     """The controller of a config string.
 
-    ``"model"``: DEFAULT_GAINS; ``"model:GAINS.json"``: those gains overriding the defaults.
+    ``"model"``: DEFAULT_GAINS; ``"model:NAME"``: the shipped gains ``NAME`` (a file in
+    ``training/controllers``, found from any working directory, e.g. a Ray Tune trial's);
+    ``"model:PATH.json"``: the gains in that file. Gains override the defaults.
     """
     if spec != "model" and not spec.startswith("model:"):
-        raise ValueError(f"a controller is 'model' or 'model:GAINS.json', got {spec!r}")
-    path = spec.partition(":")[2]
-    gains = json.loads(Path(path).read_text()) if path else None
+        raise ValueError(
+            f"a controller is 'model', 'model:NAME' or 'model:GAINS.json', got {spec!r}"
+        )
+    name = spec.partition(":")[2]
+    path = None
+    if name:
+        shipped = CONTROLLERS_DIR / f"{name}.json"
+        path = shipped if "/" not in name and shipped.is_file() else Path(name)
+        if not path.is_file():
+            known = sorted(p.stem for p in CONTROLLERS_DIR.glob("*.json"))
+            raise ValueError(f"controller {spec!r}: no file {path}; shipped gains: {known}")
+    gains = json.loads(path.read_text()) if path else None
     return ModelController(gains, limit=limit)
 
 

@@ -111,8 +111,12 @@ def score_population(X: np.ndarray, cfg: OptimiseConfig):
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
-def search(cfg: OptimiseConfig, seed: int, show: bool):
-    """One CMA-ES search; returns ((score, candidate, steps), history)."""
+def search(cfg: OptimiseConfig, seed: int, show: bool, label: str = ""):
+    """One CMA-ES search; returns ((score, candidate, steps), history).
+
+    ``label`` names the search in the progress bar (e.g. "restart 2/3"), which also shows
+    the best score and steps so far.
+    """
     import cma
 
     rng = np.random.default_rng(seed)
@@ -128,7 +132,8 @@ def search(cfg: OptimiseConfig, seed: int, show: bool):
     )
     best = (-np.inf, None, 0)
     history = []
-    for it in progress(range(cfg.iterations), cfg.iterations, f"search {seed}", show):
+    bar = progress(range(cfg.iterations), cfg.iterations, label or f"search {seed}", show)
+    for it in bar:
         Z = np.array(es.ask())
         X = mu + sd * Z
         X[:, :20] = np.clip(X[:, :20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)
@@ -137,6 +142,8 @@ def search(cfg: OptimiseConfig, seed: int, show: bool):
         i = int(np.argmax(s))
         if s[i] > best[0]:
             best = (float(s[i]), X[i].copy(), int(steps[i]))
+            if hasattr(bar, "set_postfix"):
+                bar.set_postfix(best=f"{best[0]:.2f}", steps=best[2], refresh=False)
         history.append((it, float(s.max()), int(steps.max())))
     return best, history
 
@@ -179,7 +186,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = []
     try:
         for r in range(cfg.restarts):
-            best, history = search(cfg, cfg.seed + r, cfg.progress)
+            label = f"restart {r + 1}/{cfg.restarts} (seed {cfg.seed + r})"
+            print(f"{label}: CMA-ES, {cfg.iterations} iterations", flush=True)
+            best, history = search(cfg, cfg.seed + r, cfg.progress, label)
             results.append(
                 {
                     "seed": cfg.seed + r,

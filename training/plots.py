@@ -93,7 +93,7 @@ def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
 
 
 def learning_curve(run: Path, path: Path) -> None:
-    """Completed walking steps and return against env steps, from monitor.csv and eval.csv.
+    """Completed walking steps and return against env steps, from the monitors and eval.csv.
 
     With an imitation warm start (``imitation.csv``), a first panel shows the student's steps
     after each DAgger round against the demonstration samples collected so far.
@@ -102,15 +102,12 @@ def learning_curve(run: Path, path: Path) -> None:
 
     plt = _mpl()
     imitation = run / "imitation.csv"
-    files = sorted(
-        run.glob("monitor*.csv"),
-        key=lambda f: 0 if f.name == "monitor.csv" else int(f.name.split(".")[1]),
-    )
+    files = sorted(run.glob("*.monitor.csv"), key=lambda f: int(f.name.split(".")[0]))
     mon, x = [], []
-    for f in files:  # monitor.csv, then monitor.<start step>.csv of each resumed session
+    for f in files:  # <start step>.monitor.csv of each session
         with open(f) as fh:
             rows = list(csv.reader(fh))[2:]
-        start = 0 if f.name == "monitor.csv" else int(f.name.split(".")[1])
+        start = int(f.name.split(".")[0])
         x.extend(start + np.cumsum([int(r[1]) for r in rows]))
         mon.extend(rows)
     x = np.array(x)

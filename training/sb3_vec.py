@@ -65,13 +65,15 @@ def make_sb3_vec_env(
     vec: str = "batched",
     env_id: str = "ConstrainedBiped-v0",
     action_map=None,
+    num_threads: int = 1,
 ):
     """An SB3 VecEnv of ConstrainedBiped-v0 with actions in [-1, 1] (mapped to N m).
 
     ``vec="batched"``: the batched vector env (all simulators in one compiled call) behind
     :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
     ``"dummy"``: DummyVecEnv (one process). ``action_map``: an :class:`ActionMap` (default:
-    plain rescaling by the torque limit).
+    plain rescaling by the torque limit). ``num_threads``: numba threads of the batched env
+    (1 next to a torch process on 2 cores; see the vector env).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
@@ -87,6 +89,7 @@ def make_sb3_vec_env(
             num_envs=n_envs,
             vectorization_mode="vector_entry_point",
             autoreset_mode=AutoresetMode.SAME_STEP,
+            num_threads=num_threads,
             **env_kwargs,
         )
         out = BatchedSB3VecEnv(venv, action_map)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import os
 import sys
 from pathlib import Path
 
@@ -34,7 +35,7 @@ def parse_assignments(items: list[str], flag: str, grid: bool) -> dict[str, list
     """``key=value`` (``--set``) or ``key=v1,v2`` (``--grid``) items; the keys are PPOConfig's."""
     from dataclasses import fields
 
-    from training.train_ppo import PPOConfig
+    from training.ppo_config import PPOConfig
 
     known = {f.name for f in fields(PPOConfig)}
     out: dict[str, list[str] | str] = {}
@@ -53,11 +54,12 @@ def evaluate_run(run: Path, episodes: int) -> dict[str, float]:
 
     They start at 10000: the final evaluation's seeds (0, 1, ...) stay unseen by the ranking.
     """
-    from training.evaluate import load, policy_actor, run_episodes
-    from training.train_ppo import SELECTION_SEED_OFFSET
+    from training.policy_io import load_policy, policy_actor
+    from training.ppo_config import SELECTION_SEED_OFFSET
+    from training.rollouts import run_episodes
 
-    model, vecnorm, cfg = load(run)
-    actor = policy_actor(model, vecnorm, cfg)
+    policy, norm, cfg, _ = load_policy(run)
+    actor = policy_actor(policy, norm, cfg)
     seeds = range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + episodes)
     eps = run_episodes(actor, cfg.env_kwargs(), seeds, cfg.env_id)
     steps = np.array([e["steps_completed"] for e in eps], dtype=float)
@@ -77,6 +79,10 @@ def trial(config: dict) -> None:
 
     torch.set_num_threads(1)
     from training import train_ppo
+
+    # Tune runs a trial in its own directory: relative paths (the config, files it names)
+    # mean what they mean where the sweep was started, as in a serial run
+    os.chdir(config["cwd"])
 
     out = Path(tune.get_context().get_trial_dir())
     argv = ["--config", config["config"], "--seed", str(config["seed"]), "--progress", "false"]
@@ -116,13 +122,19 @@ def main(argv: list[str] | None = None) -> int:
     overlap = set(fixed) & set(grid)
     if overlap:
         ap.error(f"{sorted(overlap)} given to both --set and --grid")
-    from ray import tune
-
+    try:
+        from ray import tune
+    except ImportError:
+        ap.error(
+            "Ray Tune is not installed: pip install -e '.[distributed]' (in an environment of "
+            "its own: Ray RLlib pins an older Gymnasium; README, Distributed)"
+        )
     name = a.name or f"sweep_{a.config.stem}"
     storage = (a.out_dir / name).resolve()
     combos = [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())]
     space = {
         "config": str(a.config.resolve()),
+        "cwd": str(Path.cwd()),
         "seed": tune.grid_search(list(a.seeds)),
         "settings": tune.grid_search([{**fixed, **c} for c in combos]),
         "eval_episodes": a.eval_episodes,

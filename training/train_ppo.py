@@ -1,14 +1,24 @@
-"""Stable-Baselines3 PPO on ConstrainedBiped-v0.
+"""Stable-Baselines3 PPO on ConstrainedBiped-v0, resumable from any interruption.
 
-    python -m training.train_ppo [--config training/configs/ppo_default.toml] [--flag value ...]
-    python -m training.train_ppo --resume runs/train_ppo/<run>   # continue from its checkpoint
+    python -m training.train_ppo [--config training/configs/ppo_walker.toml] [--flag value ...]
+    python -m training.train_ppo --resume runs/train_ppo/<run>   # continue to its saved total
+    python -m training.train_ppo --help                          # every setting, explained
 
 Actions are rescaled to [-1, 1] for the policy; observations and rewards are normalised
-(VecNormalize, saved with the model). Several environments run in one batched compiled call
-(``--vec batched``) or as SB3 subprocess envs (``--vec subproc``). Torch uses one thread per
-process by default: on a 2-core machine, 2 threads next to a busy env process made PPO ~20x
-slower. One seed drives everything. The run directory holds config.toml, command.txt,
-versions.json, checkpoints/, model.zip, vecnormalize.pkl, monitor.csv, eval.csv and tb/.
+(VecNormalize; with a teacher the network normalises its observations itself). Several
+environments run in one batched compiled call (``--vec batched``, the default) or as SB3
+subprocess envs. Threads: torch and the batched env each use one thread by default
+(``--torch-threads``, ``--env-threads``): on a 2-core machine, two of each made PPO several
+times slower. One seed drives everything.
+
+The run directory holds config.toml, command.txt, versions.json, eval.csv, one
+``<start step>.monitor.csv`` per session, tb/ and figures/, and pickle-free snapshots
+(:mod:`training.policy_io`): ``imitation/`` (the warm start), ``best/`` (best periodic
+evaluation), ``final/`` and ``checkpoints/latest/`` (with the optimiser's state). Every
+snapshot is written atomically with the previous one kept; the imitation phase checkpoints
+each DAgger round (``checkpoints/imitation/``). ``--resume`` continues whatever was
+interrupted, imitation or PPO, to the run's own ``total_timesteps`` (give
+``--total-timesteps`` to extend it).
 """
 
 from __future__ import annotations
@@ -18,119 +28,54 @@ import json
 import time
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from training.common import make_run_dir, parse_config
+from training.common import given_flags, make_run_dir, parse_config, progress, to_toml
+from training.policy_io import (
+    available,
+    find_snapshot,
+    is_complete,
+    load_optimizer,
+    load_state,
+    load_weights,
+    policy_actor,
+    read_config,
+    restore_normalizer,
+    save_snapshot,
+)
+from training.ppo_config import (
+    DEMO_SEED_OFFSET,
+    IMITATION_CHECK_SEED_OFFSET,
+    SELECTION_SEED_OFFSET,
+    TRAIN_SEED_OFFSET,
+    PPOConfig,
+    bc_weights,
+)
+from training.rollouts import run_episodes
 
-
-@dataclass
-class PPOConfig:
-    """PPO settings (numbers that differ from SB3's defaults say why)."""
-
-    env_id: str = "ConstrainedBiped-v0"
-    task: str = "walk"  # the env's task ("walk" or "paper")
-    preset: str = "default"  # the accurate physics; evaluation always uses the same
-    seed: int = 0
-    total_timesteps: int = 3_000_000
-    n_envs: int = 16  # one compiled batch: env stepping stays cheap next to the policy
-    vec: str = "batched"  # "batched", "subproc" or "dummy"
-    n_steps: int = 256  # x 16 envs = 4096 samples per update
-    batch_size: int = 512
-    n_epochs: int = 10
-    learning_rate: float = 3e-4
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_range: float = 0.2
-    ent_coef: float = 0.0
-    log_std_init: float = -3.0  # action std 0.05 (7.5 N m): the flat stance foot tolerates only
-    # about +-11 N m of ankle moment before an end unloads; SB3's 0 (150 N m) breaks contact at once
-    net_arch: tuple[int, ...] = (256, 256)
-    torch_threads: int = 1
-    eval_freq: int = 100_000  # env steps between evaluations
-    eval_episodes: int = 10
-    checkpoint_freq: int = 250_000  # env steps between checkpoints
-    reset_noise_scale: float = 0.01  # the env's default
-    fall_hip_height_m: float = 0.0  # > 0: end episodes when the hip is below it [m] (0 = off)
-    forward_reward_weight: float = 1.0  # the env's defaults
-    alive_bonus: float = 0.5
-    switch_bonus: float = 1.0
-    step_bonus: float = 5.0
-    ctrl_cost_weight: float = 0.1
-    base_controller: str = ""  # "model": learn a residual on the model controller ("" = none)
-    gear: tuple[float, ...] = (150.0,)  # N m per unit action, one value or one per joint
-    # imitation warm start (teacher "" = none): DART demonstrations of the model controller,
-    # DAgger rounds, behaviour cloning into the policy network PPO then trains
-    teacher: str = ""  # "model" or "model:GAINS.json": the model controller as the teacher
-    bc_episodes0: int = 40  # DART episodes of the teacher (round 0)
-    bc_noise_nm: float = 0.4  # std of the torque noise injected into every collected episode
-    bc_rounds: int = 10  # DAgger rounds (the student acts, the teacher labels)
-    bc_episodes: int = 30  # student episodes per DAgger round
-    bc_periods0: int = 2000  # cap on control periods per DART episode (10 s)
-    bc_periods: int = 600  # cap per DAgger episode: short, so rounds dwell on the start transient
-    bc_grad_steps: int = 20_000  # gradient steps of the first and last fit (a third in between)
-    bc_lr: float = 1e-3
-    bc_ankle_weight: float = 1.0  # weight of the stance ankle's error (the swing ankle: half)
-    action_std_nm: float = 0.0  # > 0: initial action std [N m] on every joint (overrides
-    # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
-    critic_warmup: int = 0  # rollouts at the start of PPO in which only the critic learns
-    bc_anchor_steps: int = 0  # behaviour-cloning steps on the imitation data after each PPO
-    # update (kickstarting; 0 = off)
-    bc_anchor_lr: float = 1e-4
-    out_dir: Path = Path("runs")
-    resume: str = ""  # a run directory to continue
-    progress: bool = True
-
-    def env_kwargs(self) -> dict:
-        """Keyword arguments of the env."""
-        return {
-            "task": self.task,
-            "preset": self.preset,
-            "reset_noise_scale": self.reset_noise_scale,
-            "step_bonus": self.step_bonus,
-            "forward_reward_weight": self.forward_reward_weight,
-            "alive_bonus": self.alive_bonus,
-            "switch_bonus": self.switch_bonus,
-            "ctrl_cost_weight": self.ctrl_cost_weight,
-            **({"fall_hip_height_m": self.fall_hip_height_m} if self.fall_hip_height_m > 0 else {}),
-        }
-
-    def action_map(self):
-        """Policy action -> torque (plain rescaling, or a residual on the base controller)."""
-        from training.sb3_vec import action_map_from
-
-        gear = self.gear[0] if len(self.gear) == 1 else self.gear
-        return action_map_from(self.base_controller, gear)
-
-
-TRAIN_SEED_OFFSET = 1_000_000
-"""Training episodes draw their starts from seeds ``TRAIN_SEED_OFFSET + seed + i``,
-demonstrations from ``DEMO_SEED_OFFSET + ...``, the imitation and periodic evaluations from
-20,000 and 10,000 on: never from the final evaluation's seeds (0, 1, ... in evaluate)."""
-DEMO_SEED_OFFSET = 2_000_000
-SELECTION_SEED_OFFSET = 10_000
-"""Seeds of the periodic evaluations that select ``best/`` (and rank sweep trials)."""
-
-
-def bc_weights(cfg: PPOConfig) -> np.ndarray:
-    """Per-joint weights of the cloning error: the stance ankle's, the swing ankle's half."""
-    return np.array([cfg.bc_ankle_weight, 1, 1, 1, max(1.0, cfg.bc_ankle_weight / 2)])
+RESUME_OVERRIDES = ("total_timesteps", "progress")
+"""The settings a resume may change (given as flags); every other one is the run's own."""
+IMITATION_CKPT = "checkpoints/imitation"
+"""Snapshot of the imitation phase after each DAgger round (policy, data, round, RNG)."""
+PPO_CKPT = "checkpoints/latest"
 
 
 def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     """DART demonstrations and DAgger rounds of the teacher, cloned into a new PPO model.
 
     ``make_model(mean, var)`` builds the PPO model whose policy normalises observations by
-    those statistics (of the demonstrations). Writes ``imitation.csv`` (one row per round:
-    data size, fit error, steps of 5 student episodes) into ``run``; returns the model.
+    those statistics (of the demonstrations). After every round the phase is checkpointed
+    (``checkpoints/imitation``: weights, data, round, RNG state), and a resumed run continues
+    from the last complete round with the same result. Writes ``imitation.csv`` (one row per
+    round: data size, fit error, steps of 5 student episodes). Returns (model, data).
     """
     import gymnasium as gym
 
     from training import imitation
-    from training.evaluate import run_episodes
     from training.model_controller import controller_from
 
     env = gym.make(cfg.env_id, **cfg.env_kwargs()).unwrapped
@@ -138,28 +83,54 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     gear = cfg.action_map().gear
     weights = bc_weights(cfg)
     rng = np.random.default_rng(cfg.seed)
-    seed = DEMO_SEED_OFFSET + 100_000 * cfg.seed
+    ckpt = run / IMITATION_CKPT
+    show = cfg.progress
+
+    def bar(desc):
+        return lambda seeds: progress(seeds, len(seeds), desc, enabled=show)
+
     t0 = time.time()
-    print(f"imitation: {cfg.bc_episodes0} noisy teacher episodes (DART)", flush=True)
-    demo = imitation.collect(
-        env,
-        teacher,
-        gear,
-        list(range(seed, seed + cfg.bc_episodes0)),
-        cfg.bc_periods0,
-        cfg.bc_noise_nm,
-        rng=rng,
-    )
-    seed += cfg.bc_episodes0
-    data = demo.data
-    model = make_model(*imitation.obs_statistics(data.obs))
-    rows = []
-    for k in range(cfg.bc_rounds + 1):
+    prev = ckpt.with_name(ckpt.name + ".prev")
+    where = ckpt if is_complete(ckpt) else prev if is_complete(prev) else None
+    if where is not None:
+        st = load_state(where)
+        with np.load(where / "data.npz", allow_pickle=False) as z:
+            data = imitation.Dataset(z["obs"], z["act"])
+        model = make_model(np.zeros(24), np.ones(24))  # the statistics come with the weights
+        load_weights(model.policy, where)
+        rng.bit_generator.state = st["rng"]
+        k0, seed, rows, t0 = st["round"], st["seed"], st["rows"], t0 - st["wall_s"]
+        print(f"imitation: resuming at round {k0} ({len(data)} samples)", flush=True)
+    else:
+        seed = DEMO_SEED_OFFSET + 100_000 * cfg.seed
+        print(f"imitation: {cfg.bc_episodes0} noisy teacher episodes (DART)", flush=True)
+        demo = imitation.collect(
+            env,
+            teacher,
+            gear,
+            list(range(seed, seed + cfg.bc_episodes0)),
+            cfg.bc_periods0,
+            cfg.bc_noise_nm,
+            rng=rng,
+            progress=bar("DART episodes"),
+        )
+        seed += cfg.bc_episodes0
+        data = demo.data
+        model = make_model(*imitation.obs_statistics(data.obs))
+        k0, rows = 0, []
+    for k in range(k0, cfg.bc_rounds + 1):
         full = k in (0, cfg.bc_rounds)
         steps = cfg.bc_grad_steps if full else cfg.bc_grad_steps // 3
         epochs = max(1, round(steps * 512 / len(data)))
+        print(f"imitation round {k}: fitting {len(data)} samples, {epochs} epochs", flush=True)
         mse = imitation.fit(
-            model.policy, data, epochs, lr=cfg.bc_lr, seed=cfg.seed + k, weights=weights
+            model.policy,
+            data,
+            epochs,
+            lr=cfg.bc_lr,
+            seed=cfg.seed + k,
+            weights=weights,
+            log=lambda s: print(s, flush=True),
         )
         student = imitation.student_fn(model.policy)
         check = [
@@ -167,7 +138,7 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
             for e in run_episodes(
                 lambda o, student=student: np.clip(student(o), -1, 1) * gear,
                 cfg.env_kwargs(),
-                range(20_000, 20_005),
+                range(IMITATION_CHECK_SEED_OFFSET, IMITATION_CHECK_SEED_OFFSET + 5),
                 cfg.env_id,
             )
         ]
@@ -181,8 +152,7 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
             }
         )
         print(
-            f"imitation round {k}: {len(data)} samples, mse {mse:.2e}, student steps "
-            f"{check} ({time.time() - t0:.0f} s)",
+            f"imitation round {k}: mse {mse:.2e}, student steps {check} ({time.time() - t0:.0f} s)",
             flush=True,
         )
         if k == cfg.bc_rounds:
@@ -196,9 +166,20 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
             cfg.bc_noise_nm,
             student=student,
             rng=rng,
+            progress=bar(f"DAgger round {k + 1}"),
         )
         seed += cfg.bc_episodes
         data = data + more.data
+        state = {
+            "round": k + 1,
+            "seed": seed,
+            "rows": rows,
+            "rng": rng.bit_generator.state,
+            "wall_s": time.time() - t0,
+        }
+        save_snapshot(
+            ckpt, model.policy, state, arrays={"data.npz": {"obs": data.obs, "act": data.act}}
+        )
     with open(run / "training_time.txt", "a") as fh:
         fh.write(f"imitation: {len(data)} labelled env steps, {time.time() - t0:.0f} s wall\n")
     with open(run / "imitation.csv", "w", newline="") as fh:
@@ -246,25 +227,21 @@ def _critic_warmup(cfg: PPOConfig, anchor=None):
     return CriticWarmup()
 
 
-def save(model, vecnorm, where: Path) -> None:
-    """Write model.zip, vecnormalize.pkl and num_timesteps.txt into ``where``."""
-    where.mkdir(exist_ok=True)
-    model.save(where / "model.zip")
-    vecnorm.save(str(where / "vecnormalize.pkl"))
-    (where / "num_timesteps.txt").write_text(str(model.num_timesteps))
-
-
-def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
+def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class EvalAndCheckpoint(BaseCallback):
-        """Evaluate (steps, distance, termination reasons) and checkpoint periodically."""
+        """Evaluate (steps, distance, termination reasons) and checkpoint periodically.
+
+        ``best``: the best score so far (carried over by a resume), so that ``best/`` is
+        replaced only by a better evaluation.
+        """
 
         def __init__(self):
             super().__init__()
             self.next_eval = cfg.eval_freq
             self.next_ckpt = cfg.checkpoint_freq
-            self.best = -np.inf
+            self.best = best
             self.t0 = time.time()
             self.csv = run / "eval.csv"
 
@@ -278,21 +255,37 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
 
         def _on_step(self) -> bool:
             n = self.model.num_timesteps
-            if n >= self.next_ckpt:
-                self.next_ckpt += cfg.checkpoint_freq
-                self._save(run / "checkpoints")
             if n >= self.next_eval:
                 self.next_eval += cfg.eval_freq
                 self._evaluate(n)
+            if n >= self.next_ckpt:
+                self.next_ckpt += cfg.checkpoint_freq
+                self.checkpoint()
             return True
 
-        def _save(self, where: Path):
-            save(self.model, vecnorm, where)
+        def checkpoint(self) -> None:
+            """Save the resumable state (weights, optimiser, normaliser, counters)."""
+            save_snapshot(
+                run / PPO_CKPT,
+                self.model.policy,
+                {"phase": "ppo", "num_timesteps": self.model.num_timesteps, "best": self.best},
+                vecnorm,
+                optimizer=True,
+            )
 
         def _evaluate(self, n):
-            from training.evaluate import policy_actor, run_episodes
+            from training.policy_io import ObsNormalizer
 
-            actor = policy_actor(self.model, vecnorm, cfg)
+            norm = ObsNormalizer(
+                {
+                    "norm_obs": vecnorm.norm_obs,
+                    "obs_mean": getattr(vecnorm.__dict__.get("obs_rms"), "mean", None),
+                    "obs_var": getattr(vecnorm.__dict__.get("obs_rms"), "var", None),
+                    "epsilon": vecnorm.epsilon,
+                    "clip_obs": vecnorm.clip_obs,
+                }
+            )
+            actor = policy_actor(self.model.policy, norm, cfg)
             eps = run_episodes(
                 actor,
                 cfg.env_kwargs(),
@@ -320,50 +313,86 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm):
                 w.writerow(row)
             for k in ("steps_mean", "distance_mean_m", "return_mean"):
                 self.logger.record(f"eval/{k}", row[k])
-            score = steps.mean() + 1e-3 * dist.mean()
+            score = float(steps.mean() + 1e-3 * dist.mean())
             if score > self.best:
                 self.best = score
-                self._save(run / "best")
+                save_snapshot(
+                    run / "best",
+                    self.model.policy,
+                    {"num_timesteps": n, "score": score, "steps_mean": float(steps.mean())},
+                    vecnorm,
+                )
             print(
                 f"[eval] {n} env steps: steps {steps.mean():.2f} (min {steps.min()}), "
-                f"distance {dist.mean():.2f} m, ends {dict(reasons)}",
+                f"distance {dist.mean():.2f} m, ends {dict(reasons)} "
+                f"({time.time() - self.t0:.0f} s)",
                 flush=True,
             )
 
-        def _on_training_end(self) -> None:
-            self._save(run / "checkpoints")
-
     return EvalAndCheckpoint()
+
+
+def _resolve(argv: Sequence[str] | None) -> tuple[PPOConfig, Path]:
+    """The config and run directory: a new run, or a resumed one with its own settings."""
+    cfg = parse_config(PPOConfig, argv, __doc__.splitlines()[0])
+    if not cfg.resume:
+        return cfg, make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
+    run = Path(cfg.resume)
+    saved = read_config(run)
+    given = given_flags(PPOConfig, argv) - {"resume", "config"}
+    ignored = sorted(given - set(RESUME_OVERRIDES))
+    if ignored:
+        raise SystemExit(
+            f"--resume continues a run with its own settings; only {list(RESUME_OVERRIDES)} "
+            f"may be given, not {ignored}"
+        )
+    cfg = replace(
+        saved, **{k: getattr(cfg, k) for k in given}, resume=str(run), out_dir=saved.out_dir
+    )
+    if "total_timesteps" in given:  # a new total is the run's own from now on
+        (run / "config.toml").write_text(to_toml(replace(cfg, resume="")))
+    return cfg, run
+
+
+def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
+    """The PPO model of a config, with fresh weights.
+
+    ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
+    """
+    from stable_baselines3 import PPO
+
+    policy_kwargs = cfg.policy_kwargs()
+    if cfg.teacher and mean is not None:
+        policy_kwargs["features_extractor_kwargs"] = {"mean": list(mean), "var": list(var)}
+    return PPO(
+        "MlpPolicy",
+        vecnorm,
+        n_steps=cfg.n_steps,
+        batch_size=cfg.batch_size,
+        n_epochs=cfg.n_epochs,
+        learning_rate=cfg.learning_rate,
+        gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_range,
+        ent_coef=cfg.ent_coef,
+        policy_kwargs=policy_kwargs,
+        seed=cfg.seed,
+        device="cpu",
+        tensorboard_log=str(run / "tb"),
+        verbose=0,
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Train (or resume) and write the run directory."""
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from training.sb3_vec import make_sb3_vec_env
 
-    cfg = parse_config(PPOConfig, argv, __doc__.splitlines()[0])
+    cfg, run = _resolve(argv)
     torch.set_num_threads(cfg.torch_threads)
-    if cfg.resume:
-        run = Path(cfg.resume)
-        saved = parse_config(PPOConfig, ["--config", str(run / "config.toml")], "")
-        overrides = {
-            f.name: getattr(cfg, f.name)
-            for f in fields(cfg)
-            if f.name in ("total_timesteps", "progress")
-        }
-        cfg = PPOConfig(
-            **{
-                **{f.name: getattr(saved, f.name) for f in fields(saved)},
-                **overrides,
-                "resume": str(run),
-            }
-        )
-    else:
-        run = make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
     (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
@@ -374,83 +403,83 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg.vec,
         cfg.env_id,
         cfg.action_map(),
+        num_threads=cfg.env_threads,
     )
-    start = 0
-    if cfg.resume:
-        start = int((run / "checkpoints" / "num_timesteps.txt").read_text())
-    # a resumed session writes its own monitor file, named by the step count it starts from
-    monitor = run / ("monitor.csv" if start == 0 else f"monitor.{start}.csv")
+    resuming = available(run, "checkpoint")
+    start = load_state(find_snapshot(run, "checkpoint"))["num_timesteps"] if resuming else 0
+    # one monitor file per session, named by the env step it starts from
     venv = VecMonitor(
-        venv, str(monitor), info_keywords=("steps_completed", "hip_y", "termination_reason")
+        venv,
+        str(run / f"{start}.monitor.csv"),
+        info_keywords=("steps_completed", "hip_y", "termination_reason"),
     )
+    # with a teacher the policy normalises observations itself (fixed statistics)
+    vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
+    try:
+        return _train(cfg, run, venv, vecnorm, start, resuming)
+    finally:
+        venv.close()
+
+
+def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool) -> int:
+    """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env."""
+    import torch
+
+    best = -np.inf
+    if available(run, "best"):
+        best = load_state(find_snapshot(run, "best")).get("score", -np.inf)
     demos = None
-    if cfg.resume:
-        vecnorm = VecNormalize.load(str(run / "checkpoints" / "vecnormalize.pkl"), venv)
-        model = PPO.load(run / "checkpoints" / "model.zip", env=vecnorm, device="cpu")
-        print(f"resuming at {model.num_timesteps} env steps", flush=True)
+    if resuming:
+        where = find_snapshot(run, "checkpoint")
+        model = make_model(cfg, vecnorm, run, np.zeros(24), np.ones(24))
+        load_weights(model.policy, where)
+        load_optimizer(model.policy, where)
+        restore_normalizer(vecnorm, where)
+        state = load_state(where)
+        model.num_timesteps = int(state["num_timesteps"])
+        best = max(best, state.get("best", -np.inf))
+        print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
+    elif cfg.teacher and available(run, "imitation"):
+        model = make_model(cfg, vecnorm, run, np.zeros(24), np.ones(24))
+        load_weights(model.policy, find_snapshot(run, "imitation"))
+        print("starting PPO from the run's imitation result", flush=True)
+    elif cfg.teacher:
+        model, demos = imitation_warm_start(
+            cfg, run, lambda mean, var: make_model(cfg, vecnorm, run, mean, var)
+        )
     else:
-        # with a teacher the policy normalises observations itself (fixed statistics)
-        vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
-
-        def make_model(mean=None, var=None):
-            policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init}
-            if mean is not None:
-                from training.imitation import FixedNormalizer
-
-                policy_kwargs.update(
-                    features_extractor_class=FixedNormalizer,
-                    features_extractor_kwargs={"mean": mean.tolist(), "var": var.tolist()},
-                )
-            return PPO(
-                "MlpPolicy",
-                vecnorm,
-                n_steps=cfg.n_steps,
-                batch_size=cfg.batch_size,
-                n_epochs=cfg.n_epochs,
-                learning_rate=cfg.learning_rate,
-                gamma=cfg.gamma,
-                gae_lambda=cfg.gae_lambda,
-                clip_range=cfg.clip_range,
-                ent_coef=cfg.ent_coef,
-                policy_kwargs=policy_kwargs,
-                seed=cfg.seed,
-                device="cpu",
-                tensorboard_log=str(run / "tb"),
-                verbose=0,
-            )
-
-        if cfg.teacher:
-            model, demos = imitation_warm_start(cfg, run, make_model)
-        else:
-            model = make_model()
+        model = make_model(cfg, vecnorm, run)
+    if model.num_timesteps == 0:
         if cfg.action_std_nm > 0:
             gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
             model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
-        if cfg.teacher:  # the imitation result alone, for comparison
-            save(model, vecnorm, run / "imitation")
+        if cfg.teacher and not available(run, "imitation"):  # the imitation result alone
+            arrays = {"demos.npz": {"obs": demos.obs, "act": demos.act}}
+            save_snapshot(run / "imitation", model.policy, {"num_timesteps": 0}, vecnorm,
+                          arrays=arrays)  # fmt: skip
     anchor = None
     if cfg.teacher and cfg.bc_anchor_steps > 0:
         from training.imitation import Anchor, Dataset
 
-        path = run / "imitation" / "demos.npz"
-        if demos is not None:
-            np.savez_compressed(path, obs=demos.obs, act=demos.act)
-        with np.load(path) as z:
+        with np.load(find_snapshot(run, "imitation") / "demos.npz", allow_pickle=False) as z:
             demos = Dataset(z["obs"], z["act"])
         anchor = Anchor(
             model.policy, demos, cfg.bc_anchor_lr, weights=bc_weights(cfg), seed=cfg.seed
         )
     remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
     t0 = time.time()
-    model.learn(
-        total_timesteps=remaining,
-        callback=[_callbacks(cfg, run, vecnorm), _critic_warmup(cfg, anchor)],
-        progress_bar=cfg.progress,
-        reset_num_timesteps=not cfg.resume,
-    )
+    callback = _callbacks(cfg, run, vecnorm, best)
+    if remaining > 0:
+        print(f"PPO: {remaining} env steps to go", flush=True)
+        model.learn(
+            total_timesteps=remaining,
+            callback=[callback, _critic_warmup(cfg, anchor)],
+            progress_bar=cfg.progress,
+            reset_num_timesteps=start == 0,
+        )
+        callback.checkpoint()
     wall = time.time() - t0
-    model.save(run / "model.zip")
-    vecnorm.save(str(run / "vecnormalize.pkl"))
+    save_snapshot(run / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
     with open(run / "training_time.txt", "a") as fh:
         fh.write(f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
     from training.plots import learning_curve
@@ -459,7 +488,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(
         f"done: {model.num_timesteps} env steps in {wall:.0f} s; run directory: {run}", flush=True
     )
-    venv.close()
     return 0
 
 

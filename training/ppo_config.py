@@ -1,0 +1,130 @@
+"""The PPO training configuration and the seed ranges of training, selection and evaluation.
+
+Shared by :mod:`training.train_ppo` (which trains), :mod:`training.evaluate` (which rebuilds
+the policy and its env from a run's ``config.toml``) and :mod:`training.sweep`. The comment
+after each field is its ``--help`` text.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class PPOConfig:
+    """PPO settings (numbers that differ from SB3's defaults say why)."""
+
+    env_id: str = "ConstrainedBiped-v0"  # Gymnasium id of the env
+    task: str = "walk"  # the env's task ("walk" or "paper")
+    preset: str = "default"  # the env's physics preset; evaluation uses the same
+    seed: int = 0  # drives the network's initialisation, the training starts and the demos
+    total_timesteps: int = 3_000_000  # env steps of PPO in all (a resumed run keeps its own)
+    n_envs: int = 16  # environments stepped together (one compiled batch with vec="batched")
+    vec: str = "batched"  # "batched" (one compiled call), "subproc" or "dummy" (SB3's)
+    env_threads: int = 1  # numba threads of the batched env: 1 next to torch on 2 cores
+    n_steps: int = 256  # rollout length per env (x 16 envs = 4096 samples per update)
+    batch_size: int = 512  # PPO minibatch size
+    n_epochs: int = 10  # PPO epochs per update
+    learning_rate: float = 3e-4  # Adam learning rate of PPO
+    gamma: float = 0.99  # discount factor
+    gae_lambda: float = 0.95  # GAE lambda
+    clip_range: float = 0.2  # PPO clipping
+    ent_coef: float = 0.0  # entropy bonus
+    log_std_init: float = -3.0  # initial log std of the actions: std 0.05 (7.5 N m); the flat
+    # stance foot tolerates only about +-11 N m of ankle moment before an end unloads; SB3's 0
+    # (150 N m) breaks contact at once
+    net_arch: tuple[int, ...] = (256, 256)  # hidden layers of the actor and the critic
+    torch_threads: int = 1  # torch threads (1: the env and torch do not fight for 2 cores)
+    eval_freq: int = 100_000  # env steps between evaluations (they select best/)
+    eval_episodes: int = 10  # episodes per evaluation, on the selection seeds
+    checkpoint_freq: int = 250_000  # env steps between checkpoints (resume continues there)
+    reset_noise_scale: float = 0.01  # the env's reset noise [rad]
+    fall_hip_height_m: float = 0.0  # > 0: end episodes when the hip is below it [m] (0 = off)
+    forward_reward_weight: float = 1.0  # the env's reward weights (its defaults)
+    alive_bonus: float = 0.5  # the env's alive bonus
+    switch_bonus: float = 1.0  # the env's bonus per forward model switch
+    step_bonus: float = 5.0  # the env's bonus per completed walking step
+    ctrl_cost_weight: float = 0.1  # the env's torque cost weight
+    base_controller: str = ""  # "model": learn a residual on the model controller ("" = none)
+    gear: tuple[float, ...] = (150.0,)  # N m per unit action, one value or one per joint
+
+    # imitation warm start (teacher "" = none): DART demonstrations of the model controller,
+    # DAgger rounds, behaviour cloning into the policy network PPO then trains
+    teacher: str = ""  # "model", "model:NAME" (training/controllers/NAME.json) or "model:PATH"
+    bc_episodes0: int = 40  # DART episodes of the teacher (round 0)
+    bc_noise_nm: float = 0.4  # std of the torque noise injected into every collected episode
+    bc_rounds: int = 10  # DAgger rounds (the student acts, the teacher labels)
+    bc_episodes: int = 30  # student episodes per DAgger round
+    bc_periods0: int = 2000  # cap on control periods per DART episode (10 s)
+    bc_periods: int = 600  # cap per DAgger episode: short, so rounds dwell on the start
+    bc_grad_steps: int = 20_000  # gradient steps of the first and last fit (a third between)
+    bc_lr: float = 1e-3  # learning rate of the behaviour cloning
+    bc_ankle_weight: float = 1.0  # weight of the stance ankle's error (the swing ankle: half)
+    action_std_nm: float = 0.0  # > 0: initial action std [N m] on every joint (overrides
+    # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
+    critic_warmup: int = 0  # rollouts at the start of PPO in which only the critic learns
+    bc_anchor_steps: int = 0  # behaviour-cloning steps on the imitation data after each PPO
+    # update (kickstarting; 0 = off)
+    bc_anchor_lr: float = 1e-4  # learning rate of those steps
+    out_dir: Path = Path("runs")  # where the run directory is created
+    resume: str = ""  # a run directory to continue (to its own saved total)
+    progress: bool = True  # progress bars
+
+    def env_kwargs(self) -> dict:
+        """Keyword arguments of the env."""
+        return {
+            "task": self.task,
+            "preset": self.preset,
+            "reset_noise_scale": self.reset_noise_scale,
+            "step_bonus": self.step_bonus,
+            "forward_reward_weight": self.forward_reward_weight,
+            "alive_bonus": self.alive_bonus,
+            "switch_bonus": self.switch_bonus,
+            "ctrl_cost_weight": self.ctrl_cost_weight,
+            **({"fall_hip_height_m": self.fall_hip_height_m} if self.fall_hip_height_m > 0 else {}),
+        }
+
+    def action_map(self):
+        """Policy action -> torque (plain rescaling, or a residual on the base controller)."""
+        from training.sb3_vec import action_map_from
+
+        gear = self.gear[0] if len(self.gear) == 1 else self.gear
+        return action_map_from(self.base_controller, gear)
+
+    def policy_kwargs(self) -> dict:
+        """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.
+
+        With a teacher the network normalises its observations itself
+        (:class:`training.imitation.FixedNormalizer`; the statistics are buffers, set by the
+        imitation or by the loaded weights), so that the network alone maps the raw
+        observation to its action.
+        """
+        kw: dict = {"net_arch": list(self.net_arch), "log_std_init": self.log_std_init}
+        if self.teacher:
+            from training.imitation import FixedNormalizer
+
+            kw.update(
+                features_extractor_class=FixedNormalizer,
+                features_extractor_kwargs={"mean": [0.0] * 24, "var": [1.0] * 24},
+            )
+        return kw
+
+
+TRAIN_SEED_OFFSET = 1_000_000
+"""Training episodes draw their starts from seeds ``TRAIN_SEED_OFFSET + seed + i``,
+demonstrations from ``DEMO_SEED_OFFSET + ...``, the imitation checks and periodic evaluations
+from ``IMITATION_CHECK_SEED_OFFSET`` and ``SELECTION_SEED_OFFSET`` on: never from the final
+evaluation's seeds (0, 1, ... in evaluate)."""
+DEMO_SEED_OFFSET = 2_000_000
+SELECTION_SEED_OFFSET = 10_000
+"""Seeds of the periodic evaluations that select ``best/`` (and rank sweep trials)."""
+IMITATION_CHECK_SEED_OFFSET = 20_000
+"""Seeds of the student episodes that report each imitation round's progress."""
+
+
+def bc_weights(cfg: PPOConfig) -> np.ndarray:
+    """Per-joint weights of the cloning error: the stance ankle's, the swing ankle's half."""
+    return np.array([cfg.bc_ankle_weight, 1, 1, 1, max(1.0, cfg.bc_ankle_weight / 2)])
