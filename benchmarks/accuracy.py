@@ -31,21 +31,14 @@ import numpy as np
 from numba import njit
 
 from biped_constraint_env import dynamics as dyn
+from biped_constraint_env.advance import nb_advance_w
 from biped_constraint_env.hybrid import W_CNT, nb_make_work
 from biped_constraint_env.integrators import STABILITY_CONSTANT, Integrator
 from biped_constraint_env.kinematics import K_OZ, K_SIN, NK, nb_fk
 from biped_constraint_env.model import paper_biped
-from biped_constraint_env.simulator import (
-    DEFAULT_OPTIONS,
-    MAX_EVENTS,
-    N_FST,
-    S_Q1,
-    S_QD1,
-    SimOptions,
-    nb_advance_w,
-    nb_integrate_w,
-    nb_make_scratch,
-)
+from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimOptions
+from biped_constraint_env.state import MAX_EVENTS, N_FST
+from biped_constraint_env.stepper import S_Q1, S_QD1, nb_integrate_w, nb_make_scratch
 
 RESULTS = Path(__file__).parent / "results"
 HYBRID_COLS = [

@@ -18,19 +18,12 @@ import numpy as np
 from numba import njit
 
 from biped_constraint_env import dynamics as dyn
+from biped_constraint_env.advance import nb_advance, nb_advance_batch
 from biped_constraint_env.hybrid import nb_make_work, nb_solve_mode, nb_solve_mode_w
 from biped_constraint_env.kinematics import point_bias_acceleration, point_jacobian
 from biped_constraint_env.model import paper_biped
-from biped_constraint_env.simulator import (
-    DEFAULT_OPTIONS,
-    FAST_OPTIONS,
-    MAX_EVENTS,
-    N_FST,
-    SimState,
-    nb_advance,
-    nb_advance_batch,
-    step,
-)
+from biped_constraint_env.simulator import DEFAULT_OPTIONS, FAST_OPTIONS, SimState, step
+from biped_constraint_env.state import MAX_EVENTS, N_FST
 
 
 def _timeit(fn, n: int, repeats: int = 5) -> float:

@@ -27,7 +27,7 @@ from .rewards import (
     reward_config,
     reward_weights,
 )
-from .simulator import STATUS_NONFINITE, STATUS_TERMINATED, SimState, evaluate, keypoints
+from .simulator import SimState, evaluate, keypoints
 from .starts import (
     NOMINAL_POSTURE_RAD,
     RESET_NOISE_SCALE_RAD,
@@ -36,6 +36,7 @@ from .starts import (
     draw_starts,
     state_from_options,
 )
+from .state import STATUS_NONFINITE, STATUS_TERMINATED
 from .tasks import resolve_options, resolve_task
 from .validation import check_names
 

@@ -15,23 +15,16 @@ import numpy as np
 from numba import njit
 
 from .actions import nb_check_torques
+from .advance import PARALLEL_MIN_BATCH, nb_advance_w
 from .hybrid import nb_make_work
 from .jit import njit_noalloc
 from .kinematics import NK
 from .model import N_ACTUATED, N_LINKS
 from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe, nb_observe_row
 from .rewards import nb_cycle_position, nb_fallen, nb_reward_terms
-from .simulator import (
-    PARALLEL_MIN_BATCH,
-    ST_MODE,
-    ST_STEPS,
-    STATUS_NONFINITE,
-    STATUS_OK,
-    STATUS_TERMINATED,
-    SimArrays,
-    nb_advance_w,
-    nb_make_scratch,
-)
+from .simulator import SimArrays
+from .state import ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_OK, STATUS_TERMINATED
+from .stepper import nb_make_scratch
 
 N_REWARD_OUT = 6
 """Columns of the reward output: the five REWARD_TERMS, then their sum."""

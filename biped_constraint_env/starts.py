@@ -7,9 +7,10 @@ from typing import Any
 
 import numpy as np
 
+from .advance import nb_start_batch
 from .model import N_LINKS, BipedParams
 from .modes import Mode
-from .simulator import SimArrays, SimOptions, SimState, keypoints, nb_start_batch
+from .simulator import SimArrays, SimOptions, SimState, keypoints
 from .validation import check_array, check_choice, check_int, check_mapping, check_real
 
 NOMINAL_POSTURE_RAD = (0.0, -0.1, 0.1, -0.3, -0.4, 0.7)

@@ -23,8 +23,9 @@ from .env import ConstrainedBipedEnv
 from .model import N_ACTUATED
 from .period import EnvBuffers
 from .rewards import REWARD_TERMS, TERMINATION_FALL, TERMINATION_NON_FINITE, reward_config
-from .simulator import STATUS_NONFINITE, evaluate
+from .simulator import evaluate
 from .starts import check_start_state, draw_starts, state_from_options
+from .state import STATUS_NONFINITE
 from .tasks import MAX_EPISODE_STEPS
 from .validation import check_int
 

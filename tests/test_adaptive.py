@@ -6,21 +6,19 @@ import pytest
 from conftest import STANCE_POSTURE
 from test_simulator import DT, _sliding_heel_run, table2_periods
 
+from biped_constraint_env.advance import nb_advance_w
 from biped_constraint_env.hybrid import W_CNT, nb_make_work
 from biped_constraint_env.simulator import (
     DEFAULT_OPTIONS,
     FIXED_STEP_OPTIONS,
-    FS_H,
-    MAX_EVENTS,
-    N_FST,
     SimArrays,
     SimOptions,
     SimState,
     advance,
-    nb_advance_w,
-    nb_make_scratch,
     step,
 )
+from biped_constraint_env.state import FS_H, MAX_EVENTS, N_FST
+from biped_constraint_env.stepper import nb_make_scratch
 
 REFERENCE = SimOptions(integrator="rk4", substeps=400)
 """The accuracy study's reference: fixed RK4, 0.05 ms steps, located events."""

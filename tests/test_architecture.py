@@ -1,7 +1,8 @@
 """One direction of dependency: jit (how the core is compiled) and validation (argument
-checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> simulator -> (the
-env's parts: tasks, actions, starts, rewards, observation) -> period (their compiled control
-period) -> env -> vector_env. Each module may import only modules of lower or equal rank."""
+checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> the simulator
+(state -> options -> stepper -> advance -> simulator, its Python API) -> the env's parts
+(tasks, actions, starts, rewards, observation) -> period (their compiled control period) ->
+env -> vector_env. Each module may import only modules of lower or equal rank."""
 
 import ast
 from pathlib import Path
@@ -22,6 +23,10 @@ LAYERS = [
     "contact",
     "modes",
     "hybrid",
+    "state",
+    "options",
+    "stepper",
+    "advance",
     "simulator",
     "render",
     "tasks",

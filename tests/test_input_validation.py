@@ -11,8 +11,8 @@ import pytest
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env import starts
 from biped_constraint_env.env import ENV_ARGUMENTS, ConstrainedBipedEnv
-from biped_constraint_env.simulator import H_MIN_S, _next_step
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
+from biped_constraint_env.stepper import H_MIN_S, _next_step
 
 POSTURE = list(NOMINAL_POSTURE_RAD)
 

@@ -89,7 +89,9 @@ def test_resume_refuses_to_change_the_runs_settings(tmp_path):
 
 def _imitation_rows(run: Path) -> list[tuple]:
     with open(run / "imitation.csv") as fh:
-        return [(r["round"], r["samples"], r["mse"], r["student_steps"]) for r in csv.DictReader(fh)]
+        return [
+            (r["round"], r["samples"], r["mse"], r["student_steps"]) for r in csv.DictReader(fh)
+        ]
 
 
 def test_killed_imitation_resumes_to_the_same_result(tmp_path):

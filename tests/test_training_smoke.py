@@ -267,3 +267,23 @@ def test_teacher_gains_are_found_from_any_directory(monkeypatch, tmp_path):
     controller_from("model:teacher_robust")
     with pytest.raises(ValueError, match="teacher_robust"):
         controller_from("model:no_such_gains")
+
+
+def test_accuracy_quick_run_keeps_the_default_tolerance():
+    """--quick once printed "meets_rule": false: its subset skipped the default's tolerance."""
+    from benchmarks.accuracy import quick_tolerances
+    from biped_constraint_env.simulator import DEFAULT_OPTIONS
+
+    assert DEFAULT_OPTIONS.step_tol in quick_tolerances()
+
+
+def test_benchmarks_name_their_extra_before_any_work(monkeypatch, capsys):
+    import sys
+
+    from benchmarks import accuracy, bench_env
+
+    monkeypatch.setitem(sys.modules, "mujoco", None)
+    with pytest.raises(SystemExit):
+        bench_env.main(["--steps", "10"])
+    assert ".[bench]" in capsys.readouterr().err
+    assert ".[bench]" in accuracy.mujoco_validation(None)["skipped"]
