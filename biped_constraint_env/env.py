@@ -111,8 +111,10 @@ class ConstrainedBipedEnv(gym.Env):
     ``start="midstride"`` (the walking task): model 2, leg A on its toe, turning forward about
     it: :func:`~.starts.midstride_start` with the rate uniform in
     ``MIDSTRIDE_RATE_RANGE_RAD_S`` (-1.1 to -0.9 rad/s) and the heel-up angle theta0 uniform in
-    ``MIDSTRIDE_THETA0_RANGE_RAD`` (-0.25 to -0.15 rad). ``start="rest"`` (``task="paper"``):
-    model 1, leg A standing at rest in ``posture`` (default ``NOMINAL_POSTURE_RAD``). Both add
+    ``MIDSTRIDE_THETA0_RANGE_RAD`` (-0.25 to -0.15 rad). ``start="rest"`` (``task="paper"``'s
+    default; with the walking task, the paper's scene): model 1, leg A standing at rest in
+    ``posture`` (default ``NOMINAL_POSTURE_RAD``, the paper's Fig. 2). ``start="mixed"``: rest
+    or mid-stride, 1/2 each (for learning both starts). All add
     uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` (0.01 rad) to q1..q5; the
     stance toe is at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
     starts from any state in the coordinates of docs/conventions.md (validated: points on or

@@ -20,8 +20,8 @@ MIDSTRIDE_RATE_RANGE_RAD_S = (-1.1, -0.9)
 """Range of the stance foot's turning rate about the toe at a mid-stride start [rad/s]."""
 MIDSTRIDE_THETA0_RANGE_RAD = (-0.25, -0.15)
 """Range of the stance foot's heel-up angle theta0 at a mid-stride start [rad]."""
-STARTS = ("rest", "midstride")
-"""Values of the env's ``start`` argument."""
+STARTS = ("rest", "midstride", "mixed")
+"""Values of the env's ``start`` argument ("mixed": rest or mid-stride, 1/2 each)."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 MAX_RESET_NOISE_RAD = 1.0
@@ -76,9 +76,12 @@ def sample_start(
 
     "rest": ``posture`` at rest in model 1; "midstride": :func:`midstride_start` with the rate
     and theta0 drawn uniformly from :data:`MIDSTRIDE_RATE_RANGE_RAD_S` and
-    :data:`MIDSTRIDE_THETA0_RANGE_RAD`, in model 2. Both add uniform noise in
+    :data:`MIDSTRIDE_THETA0_RANGE_RAD`, in model 2; "mixed": one of the two, with probability
+    1/2 each (one more uniform draw first). Both add uniform noise in
     [-noise_scale, noise_scale] to q1..q5 [rad].
     """
+    if start == "mixed":
+        start = "rest" if rng.random() < 0.5 else "midstride"
     if start == "rest":
         return sample_initial_q(rng, posture, noise_scale), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
     rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)

@@ -1,16 +1,19 @@
 """Evaluate a trained policy (a run directory or the committed one) on seeded episodes.
 
     python -m training.evaluate POLICY_DIR [--episodes 10] [--seed 0] [--which final]
-        [--compare] [--out DIR]
+        [--start midstride|rest] [--compare] [--out DIR]
 
 Runs N seeded episodes of the policy's env (its config; by default the walking task of
 ConstrainedBiped-v0, default physics, strict checks) with the deterministic network and prints
-completed steps (mean, std, min), distance, speed, torque cost and termination reasons. With
+completed steps (mean, std, min), distance, speed, torque cost and termination reasons.
+``--start`` picks the start (default: the config's; a policy trained on both starts is
+evaluated mid-stride); from rest the gait-initiation figures are printed too. With
 ``--compare`` it runs, on the same seeds: the imitation result alone (the run's ``imitation``
 snapshot, when the policy was warm-started from a teacher), the teacher (the model
-controller) alone, the policy under 3x the reset noise and under a push, and the Table 2 open
-loop. Writes ``evaluation.json``, ``figures/best.gif`` and Fig. 6-style strips of the best and
-the worst episode into POLICY_DIR (or ``--out``).
+controller) alone, the policy under 3x the reset noise and under a push, the Table 2 open
+loop, and the network and the teacher from rest (1x and 3x reset noise) with their
+gait-initiation figures. Writes ``evaluation.json``, ``figures/best.gif`` and Fig. 6-style
+strips of the best and the worst episode into POLICY_DIR (or ``--out``).
 
 The policy is loaded from weights (safetensors) and plain data (TOML, JSON, npz): nothing in
 POLICY_DIR is unpickled (:mod:`training.policy_io`).
@@ -22,14 +25,24 @@ import argparse
 import json
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from training.policy_io import SNAPSHOTS, available, load_policy, policy_actor
-from training.rollouts import PUSH_HIP_DV_M_S, PUSH_TIME_S, run_episodes, summarize, table_row
+from training.rollouts import (
+    PUSH_HIP_DV_M_S,
+    PUSH_TIME_S,
+    initiation,
+    run_episodes,
+    summarize,
+    table_row,
+)
 
 GIF_MAX_FRAMES = 500
+MIN_STEPS_FROM_REST = 20
+"""Complete steps in a 30 s episode from rest that count as a successful start and walk."""
 
 
 def open_loop_baselines() -> list[dict]:
@@ -38,10 +51,14 @@ def open_loop_baselines() -> list[dict]:
 
     rows = []
     for label, kw in (
-        ("Table 2 open loop, task='paper'", {}),
+        ("Table 2 open loop from rest, task='paper'", {}),
         (
-            "Table 2 open loop, default preset, 2 ms",
+            "Table 2 open loop from rest, default preset, 2 ms",
             {"preset": "default", "dt": 0.002, "max_periods": 5000},
+        ),
+        (
+            "Table 2 open loop from rest, the walking task (5 ms, the row changes at each switch)",
+            {"preset": "default", "dt": 0.005, "stop_at_switch": True, "max_periods": 6000},
         ),
     ):
         out = run(OpenLoopConfig(gif=False, progress=False, **kw), record_frames=False)
@@ -90,7 +107,56 @@ def figures(actor, cfg, seed_best: int, seed_worst: int, eps_by_seed: dict, out_
         )
 
 
-def _rows_compare(run_dir: Path, actor, cfg, seeds) -> list[dict]:
+STRIP_S = 2.0
+"""The start-from-rest strips show the first this many seconds [s]."""
+
+
+def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
+    """Figure: the first ``STRIP_S`` from rest (stick figures, centre of mass and pressure)."""
+    from training import plots
+    from training.rollouts import com_and_cop
+
+    frames = []
+
+    def record(env, _k):
+        u = env.unwrapped
+        if u.state.t <= STRIP_S:
+            com, cop = com_and_cop(env)
+            st = u.state
+            frames.append(
+                {"t": st.t, "keypoints": u.keypoints(), "com": com, "cop": cop, "mode": st.mode}
+            )
+
+    kw = {**cfg.env_kwargs(), "start": "rest"}
+    (ep,) = run_episodes(actor, kw, [seed], cfg.env_id, record=record)
+    first = f"first step at {ep['step_t_s'][0]:.2f} s" if ep["step_t_s"] else "no step"
+    plots.initiation_strip(
+        frames,
+        path,
+        f"{who} from rest, the paper's Fig. 2 posture (seed {seed}): first {STRIP_S:.0f} s; "
+        f"{first}, {ep['steps_completed']} steps in the episode",
+    )
+
+
+def _rest_rows(actor, cfg, seeds) -> list[dict]:
+    """The network and the teacher from rest (1x and 3x reset noise), with initiation figures."""
+    from training.model_controller import TEACHER, controller_from
+
+    spec = cfg.teacher if "+" in cfg.teacher else TEACHER  # a teacher with its start phase
+    kw = {**cfg.env_kwargs(), "start": "rest"}
+    noisy = {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]}
+    rows = []
+    teacher = controller_from(spec)
+    for label, who in (("policy", actor), (f"model controller ({spec!r})", teacher)):
+        for suffix, env_kw in (("", kw), (", 3x reset noise", noisy)):
+            name = f"{label} from rest{suffix}"
+            row = summarize(name, run_episodes(who, env_kw, seeds, cfg.env_id, desc=name))
+            row["initiation"] = initiation(row["episodes"], MIN_STEPS_FROM_REST)
+            rows.append(row)
+    return rows, teacher
+
+
+def _rows_compare(run_dir: Path, actor, cfg, seeds, out_dir: Path) -> list[dict]:
     """The ``--compare`` rows: stresses of the policy, imitation alone, teacher, Table 2."""
     from training.model_controller import controller_from
 
@@ -137,7 +203,10 @@ def _rows_compare(run_dir: Path, actor, cfg, seeds) -> list[dict]:
             ),
         )
     )
-    print("Table 2 open loop (paper preset, then default physics at 2 ms)", flush=True)
+    rest, teacher = _rest_rows(actor, cfg, seeds)
+    rows += rest
+    rest_strip(teacher, cfg, out_dir / "figures" / "rest_start_teacher.png", "the teacher")
+    print("Table 2 open loop from rest (paper preset; default physics at 2 ms; walking task)")
     return rows + open_loop_baselines()
 
 
@@ -148,6 +217,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
     ap.add_argument("--which", default="final", choices=sorted(SNAPSHOTS), help="snapshot")
+    ap.add_argument(
+        "--start",
+        choices=["midstride", "rest"],
+        default=None,
+        help="episode start (default: the config's; mid-stride for a policy trained on both)",
+    )
+    ap.add_argument("--dt", type=float, default=None, help="control period [s] (default: config)")
+    ap.add_argument("--hold", action="store_true", help="hold each action through model switches")
     ap.add_argument("--compare", action="store_true", help="also run the baselines and stresses")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: RUN_DIR)")
     args = ap.parse_args(argv)
@@ -166,6 +243,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error(str(e))
     import biped_constraint_env  # noqa: F401  (compiles on a machine's first run)
 
+    start = args.start or ("midstride" if cfg.start == "mixed" else cfg.start)
+    cfg = replace(cfg, start=start)
+    if args.dt is not None:
+        cfg = replace(cfg, dt=args.dt)
+    if args.hold:
+        cfg = replace(cfg, hold_torques=True)
+
     print(
         f"loaded in {time.time() - t0:.0f} s ({state.get('num_timesteps', 0)} PPO env steps); "
         f"{args.episodes} episodes of up to 30 s each",
@@ -176,24 +260,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     seeds = list(range(args.seed, args.seed + args.episodes))
     actor = policy_actor(policy, norm, cfg)
     label = "policy" + ("" if cfg.base_controller == "" else " (residual on the model controller)")
+    label += f" ({start} start)"
     main_row = summarize(
         label, run_episodes(actor, cfg.env_kwargs(), seeds, cfg.env_id, desc="policy episodes")
     )
+    if start == "rest":
+        main_row["initiation"] = initiation(main_row["episodes"], MIN_STEPS_FROM_REST)
     print(table_row(main_row), flush=True)
     rows = [main_row]
     if args.compare:
-        rows += _rows_compare(args.run_dir, actor, cfg, seeds)
+        rows += _rows_compare(args.run_dir, actor, cfg, seeds, out_dir)
     steps = np.array([e["steps_completed"] for e in main_row["episodes"]], dtype=float)
     dist = np.array([e["distance_m"] for e in main_row["episodes"]])
     order = np.argsort(steps + 1e-3 * dist)
     by_seed = {e["seed"]: e for e in main_row["episodes"]}
     print("writing the GIF and the strips", flush=True)
     figures(actor, cfg, seeds[order[-1]], seeds[order[0]], by_seed, out_dir)
-    summary = {"which": args.which, "seeds": seeds, "results": rows}
+    if args.compare or start == "rest":
+        rest_strip(actor, cfg, out_dir / "figures" / "rest_start_network.png", "the network")
+    summary = {"which": args.which, "start": start, "seeds": seeds, "results": rows}
     (out_dir / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
     print(
         f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "
-        f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, strict physics:"
+        f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, {start} start, strict physics:"
     )
     print(
         "| controller | complete steps (mean ± std, min) | distance [m] | speed [m/s] | "
@@ -202,6 +291,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("|---|---|---|---|---|---|")
     for r in rows:
         print(table_row(r))
+    init = [r for r in rows if "initiation" in r]
+    if init:
+        print(f"\ngait initiation from rest (success: >= {MIN_STEPS_FROM_REST} steps in 30 s):")
+        print("| controller | success | first step at [s] (mean, max) | first step [m] | "
+              "steps to 90% of the steady speed (mean, max) |")  # fmt: skip
+        print("|---|---|---|---|---|")
+        for r in init:
+            i = r["initiation"]
+            print(
+                f"| {r['controller']} | {i['success_rate']:.0%} | {i['t_first_step_s_mean']:.2f}, "
+                f"{i['t_first_step_s_max']:.2f} | {i['first_step_m_mean']:.2f} | "
+                f"{i['steps_to_90pct_speed_mean']:.1f}, {i['steps_to_90pct_speed_max']} |"
+            )
     print(
         f"\nfigures: {out_dir / 'figures'} (best.gif, best_strip.png, worst_strip.png); "
         f"summary: {out_dir / 'evaluation.json'}; {time.time() - t0:.0f} s"

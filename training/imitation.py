@@ -82,6 +82,8 @@ def collect(
     obs_l, act_l, steps, ends = [], [], [], []
     for seed in progress(seeds) if progress else seeds:
         obs, info = env.reset(seed=int(seed))
+        if hasattr(teacher, "reset"):  # a teacher with a start phase: per episode
+            teacher.reset()
         for _ in range(max_periods):
             label = np.asarray(teacher(obs), dtype=np.float64)
             obs_l.append(obs.astype(np.float32))

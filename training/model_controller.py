@@ -124,8 +124,33 @@ def state_from_obs(obs: np.ndarray) -> SimState:
     return SimState(0.0, Mode(mode), int(round(obs[_I["stance_side"]])), q, qd)
 
 
+AT_REST_RATE_RAD_S = 1e-3
+"""A model-1 state whose joint rates are all below this [rad/s] is at rest: a start."""
+
+
+def _checked_gains(gains: dict[str, float] | None, what: str) -> dict[str, float]:
+    unknown = set(gains or {}) - set(DEFAULT_GAINS)
+    if unknown:
+        raise ValueError(f"unknown {what} {sorted(unknown)}; known: {sorted(DEFAULT_GAINS)}")
+    if not all(np.isfinite(v) for v in (gains or {}).values()):
+        raise ValueError(f"{what} must be finite")
+    return dict(gains or {})
+
+
+def at_rest(state: SimState) -> bool:
+    """Whether a state is a start at rest (model 1, every joint rate below AT_REST_RATE_RAD_S)."""
+    return int(state.mode) == 1 and bool(np.all(np.abs(state.qd) < AT_REST_RATE_RAD_S))
+
+
 class ModelController:
-    """Torques [N m] (5,) from an observation or a state; see the module docstring."""
+    """Torques [N m] (5,) from an observation or a state; see the module docstring.
+
+    With ``start_gains`` the controller has a *start phase*: an observation at rest
+    (:func:`at_rest`) starts it, and the first change of the stance leg (the first 4 -> 1
+    switch: the first step completed) ends it. In the start phase ``start_gains`` override the
+    gait's gains. This is the controller's only memory, so call it on the observations of one
+    episode in order (one controller per environment).
+    """
 
     def __init__(
         self,
@@ -133,31 +158,52 @@ class ModelController:
         params: BipedParams | None = None,
         options: SimOptions = DEFAULT_OPTIONS,
         limit: float = TORQUE_LIMIT_NM,
+        start_gains: dict[str, float] | None = None,
     ):
-        """``gains`` override :data:`DEFAULT_GAINS` (unknown names raise ValueError)."""
-        unknown = set(gains or {}) - set(DEFAULT_GAINS)
-        if unknown:
-            raise ValueError(f"unknown gains {sorted(unknown)}; known: {sorted(DEFAULT_GAINS)}")
-        self.g = {**DEFAULT_GAINS, **(gains or {})}
-        if not all(np.isfinite(v) for v in self.g.values()):
-            raise ValueError("gains must be finite")
+        """Gains override :data:`DEFAULT_GAINS`, start gains those (unknown names: ValueError)."""
+        self.g = {**DEFAULT_GAINS, **_checked_gains(gains, "gains")}
+        self.start_g = (
+            None
+            if start_gains is None
+            else {**self.g, **_checked_gains(start_gains, "start gains")}
+        )
         self.params = params if params is not None else paper_biped()
         self.options = options
         self.limit = float(limit)
+        self.starting_side: int | None = None  # the stance leg of the start phase (None: off)
+
+    def reset(self) -> None:
+        """Forget the start phase (call at every episode start; a rest start arms it again)."""
+        self.starting_side = None
+
+    def gains_for(self, state: SimState) -> dict[str, float]:
+        """The gains for the next torque: the start phase's or the gait's (updates the phase)."""
+        if self.start_g is None:
+            return self.g
+        if at_rest(state):
+            self.starting_side = state.stance_side
+        elif self.starting_side is not None and state.stance_side != self.starting_side:
+            self.starting_side = None  # the first step is complete
+        return self.g if self.starting_side is None else self.start_g
 
     def __call__(self, obs: np.ndarray, residual: np.ndarray | None = None) -> np.ndarray:
         """Torques for one observation (24,) or a batch (n, 24) -> (5,) or (n, 5).
 
         ``residual`` [N m] (same leading shape, (5,) or (n, 5)): added to the controller's
-        torques and the sum projected back onto its constraints (see :meth:`torques`).
+        torques and the sum projected back onto its constraints (see :meth:`torques`). A
+        controller with a start phase takes one observation at a time (its phase is per
+        episode).
         """
         obs = np.asarray(obs, dtype=np.float64)
         if obs.ndim == 2:
+            if self.start_g is not None:
+                raise ValueError("a controller with a start phase takes one observation at once")
             res = [None] * len(obs) if residual is None else np.asarray(residual, np.float64)
             return np.stack(
                 [self.torques(state_from_obs(o), r) for o, r in zip(obs, res, strict=True)]
             )
-        return self.torques(state_from_obs(obs), residual)
+        state = state_from_obs(obs)
+        return self.torques(state, residual, self.gains_for(state))
 
     # ------------------------------------------------------------------ model queries
     def _affine(self, state: SimState):
@@ -187,15 +233,20 @@ class ModelController:
         return kin[axis], J, kin[4 + axis]
 
     # ------------------------------------------------------------------ the law
-    def torques(self, state: SimState, residual: np.ndarray | None = None) -> np.ndarray:
+    def torques(
+        self,
+        state: SimState,
+        residual: np.ndarray | None = None,
+        gains: dict[str, float] | None = None,
+    ) -> np.ndarray:
         """Torques [N m] (5,) for a simulator state.
 
         With ``residual`` (5,) [N m] (a learned correction): the torques nearest to the
         controller's plus the residual that still satisfy the inequality constraints (contacts
         pushing by ``fmin``, the trailing foot's clearance, the torque limits) at the sample, a
-        safety projection.
+        safety projection. ``gains``: the gains to use (default: the gait's).
         """
-        g = self.g
+        g = self.g if gains is None else gains
         m = int(state.mode)
         q, qd = state.q, state.qd
         y, yd = _wrap(_C @ q + _C0), _C @ qd
@@ -302,6 +353,8 @@ class ModelController:
 
 CONTROLLERS_DIR = Path(__file__).resolve().parent / "controllers"
 """The shipped gain sets (``"model:NAME"`` names ``CONTROLLERS_DIR/NAME.json``)."""
+TEACHER = "model:teacher_robust+start_rest"
+"""The teacher: the noise-robust gait and its start phase from rest (docs/walking.md)."""
 
 
 def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelController:
@@ -309,22 +362,28 @@ def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelControlle
 
     ``"model"``: DEFAULT_GAINS; ``"model:NAME"``: the shipped gains ``NAME`` (a file in
     ``training/controllers``, found from any working directory, e.g. a Ray Tune trial's);
-    ``"model:PATH.json"``: the gains in that file. Gains override the defaults.
+    ``"model:PATH.json"``: the gains in that file. Gains override the defaults. A suffix
+    ``+START`` (a name or a path, as the gains) adds a start phase with those gains
+    (``"model:teacher_robust+start_rest"``, the teacher from rest and mid-stride).
     """
     if spec != "model" and not spec.startswith("model:"):
         raise ValueError(
-            f"a controller is 'model', 'model:NAME' or 'model:GAINS.json', got {spec!r}"
+            f"a controller is 'model', 'model:NAME' or 'model:GAINS.json' (+START), got {spec!r}"
         )
-    name = spec.partition(":")[2]
-    path = None
-    if name:
-        shipped = CONTROLLERS_DIR / f"{name}.json"
-        path = shipped if "/" not in name and shipped.is_file() else Path(name)
-        if not path.is_file():
-            known = sorted(p.stem for p in CONTROLLERS_DIR.glob("*.json"))
-            raise ValueError(f"controller {spec!r}: no file {path}; shipped gains: {known}")
-    gains = json.loads(path.read_text()) if path else None
-    return ModelController(gains, limit=limit)
+    name, _, start = spec.partition(":")[2].partition("+")
+    gains = _read_gains(name, spec) if name else None
+    start_gains = _read_gains(start, spec) if start else None
+    return ModelController(gains, limit=limit, start_gains=start_gains)
+
+
+def _read_gains(name: str, spec: str) -> dict[str, float]:
+    """The gains of a shipped name (``training/controllers/NAME.json``) or a JSON path."""
+    shipped = CONTROLLERS_DIR / f"{name}.json"
+    path = shipped if "/" not in name and shipped.is_file() else Path(name)
+    if not path.is_file():
+        known = sorted(p.stem for p in CONTROLLERS_DIR.glob("*.json"))
+        raise ValueError(f"controller {spec!r}: no file {path}; shipped gains: {known}")
+    return json.loads(path.read_text())
 
 
 def midstride_state(rate: float = -1.0, theta0: float = -0.2, lean: float = 0.1) -> SimState:
@@ -339,6 +398,7 @@ def run_episode(env, controller, options=None, seed=None, max_periods=20_000, ca
     Returns (steps, hip travel [m], termination reason or None, sim time [s]).
     """
     obs, info = env.reset(seed=seed, options=options)
+    controller.reset()
     y0 = info["hip_y"]
     for _ in range(max_periods):
         obs, _, terminated, truncated, info = env.step(controller(obs))
@@ -365,7 +425,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument(
         "--start",
         choices=("rest", "midstride"),
-        help="run seeded env resets of this kind (v1's rest, v2's mid-stride) instead of --rates",
+        help="run seeded env resets of this kind (rest: the paper's Fig. 2 posture) instead of "
+        "--rates",
     )
     ap.add_argument("--seeds", type=int, default=10, help="reset seeds 0..N-1 with --start")
     ap.add_argument("--cap", type=int, default=0, help="stop an episode at this many steps (0: no)")
@@ -374,13 +435,28 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="hold the torque through model switches (env default) instead",
     )
-    ap.add_argument("--gains", type=Path, help="JSON {name: value} overriding the defaults")
-    a = ap.parse_args(argv)
-    gains = json.loads(a.gains.read_text()) if a.gains else None
-    env = ConstrainedBipedEnv(
-        preset=a.preset, dt=a.dt, stop_at_switch=not a.hold, start=a.start or "rest"
+    ap.add_argument(
+        "--controller",
+        default=TEACHER,
+        help=f"controller spec (controller_from; default {TEACHER!r}: the teacher, its start "
+        "phase from rest included)",
     )
-    ctl = ModelController(gains, env.params, env.options)
+    ap.add_argument("--gains", type=Path, help="JSON {name: value}: the gait's gains instead")
+    ap.add_argument("--noise", type=float, default=None, help="reset noise [rad] (env default)")
+    a = ap.parse_args(argv)
+    ctl = controller_from(a.controller)
+    if a.gains:
+        ctl = ModelController(
+            json.loads(a.gains.read_text()), start_gains=ctl.start_g and dict(ctl.start_g)
+        )
+    env = ConstrainedBipedEnv(
+        preset=a.preset,
+        dt=a.dt,
+        stop_at_switch=not a.hold,
+        start=a.start or "rest",
+        **({} if a.noise is None else {"reset_noise_scale": a.noise}),
+    )
+    ctl.params, ctl.options = env.params, env.options
     n = int(round(a.seconds / a.dt))
     runs = (
         [(f"seed {s}", None, s) for s in range(a.seeds)]

@@ -151,3 +151,52 @@ def learning_curve(run: Path, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def initiation_strip(frames: Sequence[dict], path: Path, title: str, every_s: float = 0.1) -> None:
+    """The start from rest: stick figures, centre of mass and centre of pressure.
+
+    Above: stick figures every ``every_s`` [s] with the centre of mass (dots) and the centre
+    of pressure (triangles on the ground); below: their y against time.
+
+    ``frames``: per control period, ``t`` [s], ``keypoints``, ``com`` (y, z) and ``cop`` (y).
+    """
+    plt = _mpl()
+    fig, (ax, bx) = plt.subplots(2, 1, figsize=(10, 6.5), height_ratios=[1.3, 1])
+    cmap = plt.get_cmap("viridis")
+    t_end = frames[-1]["t"]
+    sel, next_t = [], 0.0
+    for fr in frames:
+        if fr["t"] >= next_t - 1e-9:
+            sel.append(fr)
+            next_t += every_s
+    for fr in sel:
+        c = cmap(fr["t"] / max(t_end, 1e-9))
+        for a, b in SEGMENTS:
+            pa, pb = fr["keypoints"][a], fr["keypoints"][b]
+            ax.plot([pa[0], pb[0]], [pa[1], pb[1]], color=c, lw=1.0)
+        ax.plot(*fr["com"], "o", color=c, ms=4)
+        if np.isfinite(fr["cop"]):
+            ax.plot(fr["cop"], -0.04, "^", color=c, ms=5)
+    ax.axhline(0.0, color="k", lw=1)
+    ax.set_aspect("equal")
+    ax.set_ylabel("z [m]")
+    ax.set_title(title, fontsize=9)
+    t = np.array([fr["t"] for fr in frames])
+    for key, label in (("com", "centre of mass"), ("cop", "centre of pressure")):
+        y = np.array([fr[key][0] if key == "com" else fr[key] for fr in frames])
+        bx.plot(t, y, label=label)
+    for name, style in (("stance_heel", "k--"), ("stance_toe", "k:")):
+        y = [fr["keypoints"][name][0] for fr in frames]
+        bx.plot(t, y, style, lw=0.8, label=name.replace("_", " ") + " (current stance foot)")
+    for fr0, fr1 in zip(frames, frames[1:], strict=False):
+        if fr1["mode"] != fr0["mode"]:
+            bx.axvline(fr1["t"], color="0.8", lw=0.6)
+            bx.text(fr1["t"], bx.get_ylim()[1], f" {fr1['mode']}", fontsize=7, va="top")
+    bx.set_xlabel("t [s] (grey lines: model switches, new model's number on top)")
+    bx.set_ylabel("y [m]")
+    bx.legend(fontsize=7, loc="upper left")
+    bx.grid(lw=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

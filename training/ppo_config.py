@@ -20,6 +20,9 @@ class PPOConfig:
     env_id: str = "ConstrainedBiped-v0"  # Gymnasium id of the env
     task: str = "walk"  # the env's task ("walk" or "paper")
     preset: str = "default"  # the env's physics preset; evaluation uses the same
+    start: str = "midstride"  # the env's start: "midstride", "rest" (Fig. 2) or "mixed" (both)
+    dt: float = 0.0  # the env's control period [s] (0: the task's, 5 ms for "walk")
+    hold_torques: bool = False  # hold the action through model switches (stop_at_switch off)
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
     total_timesteps: int = 3_000_000  # env steps of PPO in all (a resumed run keeps its own)
     n_envs: int = 16  # environments stepped together (one compiled batch with vec="batched")
@@ -78,6 +81,7 @@ class PPOConfig:
         return {
             "task": self.task,
             "preset": self.preset,
+            "start": self.start,
             "reset_noise_scale": self.reset_noise_scale,
             "step_bonus": self.step_bonus,
             "forward_reward_weight": self.forward_reward_weight,
@@ -85,6 +89,8 @@ class PPOConfig:
             "switch_bonus": self.switch_bonus,
             "ctrl_cost_weight": self.ctrl_cost_weight,
             **({"fall_hip_height_m": self.fall_hip_height_m} if self.fall_hip_height_m > 0 else {}),
+            **({"dt": self.dt} if self.dt > 0 else {}),
+            **({"stop_at_switch": False} if self.hold_torques else {}),
         }
 
     def action_map(self):

@@ -73,7 +73,10 @@ def run_episodes(
     out = []
     for k, seed in enumerate(progress(seeds, len(seeds), desc, enabled=bool(desc))):
         obs, info = env.reset(seed=int(seed))
+        if hasattr(actor, "reset"):  # a controller with per-episode memory (a start phase)
+            actor.reset()
         y0, t_prev, cost, ret, done, pushed = info["hip_y"], 0.0, 0.0, 0.0, False, False
+        steps, step_t, step_hip, first_m = 0, [], [], None
         while not done:
             if record:
                 record(env, k)
@@ -86,6 +89,12 @@ def run_episodes(
             t_prev = info["t"]
             ret += r
             done = term or trunc
+            if info["steps_completed"] > steps:  # a step completed in this period
+                steps = info["steps_completed"]
+                step_t.append(info["t"])
+                step_hip.append(info["hip_y"] - y0)
+                if first_m is None:  # the new stance toe's advance over the start's [m]
+                    first_m = float(env.unwrapped.state.root_y)
         dist = info["hip_y"] - y0
         out.append(
             {
@@ -97,10 +106,53 @@ def run_episodes(
                 "return": ret,
                 "t_s": info["t"],
                 "end": info["termination_reason"] or "time_limit",
+                "step_t_s": step_t,
+                "step_hip_y_m": step_hip,
+                "first_step_m": first_m,
             }
         )
     env.close()
     return out
+
+
+STEADY_FROM_STEP = 10
+"""Steps from this one on set an episode's steady speed (for the initiation figures)."""
+
+
+def initiation(eps: list[dict], min_steps: int = 1) -> dict:
+    """Gait-initiation figures of episodes started at rest.
+
+    Success: at least ``min_steps`` completed steps. Over the episodes that completed a first
+    step: the time to it [s] and its length (the new stance toe's advance) [m]; over those
+    with at least ``STEADY_FROM_STEP`` + 2 steps: the steps until the hip's speed over one step
+    first reaches 90 % of the steady speed (the median of the per-step speeds from step
+    ``STEADY_FROM_STEP`` on).
+    """
+    first = [e for e in eps if e["step_t_s"]]
+    to_90 = []
+    for e in eps:
+        t = np.array([0.0, *e["step_t_s"]])
+        y = np.array([0.0, *e["step_hip_y_m"]])
+        if len(t) < STEADY_FROM_STEP + 3:
+            continue
+        v = np.diff(y) / np.diff(t)  # speed over each step
+        steady = float(np.median(v[STEADY_FROM_STEP:]))
+        to_90.append(int(np.argmax(v >= 0.9 * steady)) + 1)
+    ok = [e for e in eps if e["steps_completed"] >= min_steps]
+    return {
+        "episodes": len(eps),
+        "success_rate": len(ok) / len(eps),
+        "success_min_steps": min_steps,
+        "t_first_step_s_mean": _mean([e["step_t_s"][0] for e in first]),
+        "t_first_step_s_max": max((e["step_t_s"][0] for e in first), default=float("nan")),
+        "first_step_m_mean": _mean([e["first_step_m"] for e in first]),
+        "steps_to_90pct_speed_mean": _mean(to_90),
+        "steps_to_90pct_speed_max": max(to_90, default=float("nan")),
+    }
+
+
+def _mean(x) -> float:
+    return float(np.mean(x)) if len(x) else float("nan")
 
 
 def summarize(label: str, eps: list[dict]) -> dict:
@@ -130,3 +182,33 @@ def table_row(r: dict) -> str:
         f" | {r['distance_mean_m']:.2f} ± {r['distance_std_m']:.2f} | {r['speed_mean_m_s']:.2f} "
         f"| {r['torque_cost_mean']:.0f} | {r['ends']} |"
     )
+
+
+def com_and_cop(env) -> tuple[np.ndarray, float]:
+    """The centre of mass (y, z) [m] and the centre of pressure y [m] of an env's state.
+
+    The centre of pressure is the force-weighted mean of the contact points' y: the stance
+    toe and heel (their normal forces, observation entries 21-22) and the point contact (23:
+    the swing heel in model 3, the trailing toe in model 4).
+    """
+    u = env.unwrapped
+    st = u.state
+    pts = u.keypoints()
+    links = u.params.chain(st.stance_side).links
+    segments = (
+        ("stance_heel", "stance_toe"),
+        ("stance_ankle", "stance_knee"),
+        ("stance_knee", "hip"),
+        ("hip", "swing_knee"),
+        ("swing_knee", "swing_ankle"),
+        ("swing_heel", "swing_toe"),
+    )
+    m = np.array([link.mass_kg for link in links])
+    mid = np.array([(pts[a] + pts[b]) / 2 for a, b in segments])
+    com = (m[:, None] * mid).sum(axis=0) / m.sum()
+    obs = u._obs[0]
+    point = "swing_heel" if int(st.mode) == 3 else "swing_toe"
+    f = np.array([obs[21], obs[22], obs[23]])
+    y = np.array([pts["stance_toe"][0], pts["stance_heel"][0], pts[point][0]])
+    cop = float((f * y).sum() / f.sum()) if f.sum() > 1e-9 else float("nan")
+    return com, cop

@@ -1,0 +1,86 @@
+"""The paper's scene: starts at rest in the Fig. 2 posture, the teacher's start phase, and the
+evaluation command's start flag."""
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import biped_constraint_env  # noqa: F401
+from training.model_controller import TEACHER, at_rest, controller_from, state_from_obs
+
+POLICY = Path(__file__).resolve().parents[1] / "policies" / "ppo_walker"
+
+
+def test_mixed_start_draws_both_starts_the_same_in_both_envs():
+    kw = {"start": "mixed"}
+    single = gym.make("ConstrainedBiped-v0", **kw)
+    modes = [single.reset(seed=s)[1]["mode"] for s in range(20)]
+    assert set(modes) == {1, 2}  # at rest (model 1) and mid-stride (model 2)
+    venv = gym.make_vec(
+        "ConstrainedBiped-v0", num_envs=20, vectorization_mode="vector_entry_point", **kw
+    )
+    _, info = venv.reset(seed=0)
+    assert list(info["mode"]) == modes
+
+
+def test_rest_start_is_the_fig2_posture_at_rest():
+    env = gym.make("ConstrainedBiped-v0", start="rest")
+    obs, info = env.reset(seed=0)
+    assert info["mode"] == 1 and at_rest(state_from_obs(obs))
+
+
+def _first_step(ctl, env_kw, seed=0, limit_s=5.0):
+    env = gym.make("ConstrainedBiped-v0", **env_kw)
+    obs, info = env.reset(seed=seed)
+    ctl.reset()
+    phases = []
+    while info["t"] < limit_s and info["steps_completed"] < 1:
+        obs, _, term, _, info = env.step(ctl(obs))
+        phases.append(ctl.starting_side)
+        assert not term, info["termination_reason"]
+    return info, phases
+
+
+def test_teacher_completes_its_first_step_from_rest_in_its_start_phase():
+    ctl = controller_from(TEACHER)
+    info, phases = _first_step(ctl, {"start": "rest"})
+    assert info["steps_completed"] == 1 and info["stance_side"] == 1
+    assert all(p == 0 for p in phases[:-1])  # the start phase, until the legs swap
+    assert ctl.starting_side is None
+
+
+def test_gait_alone_does_not_start_from_rest():
+    ctl = controller_from("model:teacher_robust")  # no start phase
+    env = gym.make("ConstrainedBiped-v0", start="rest")
+    obs, info = env.reset(seed=0)
+    for _ in range(2000):
+        obs, _, term, _, info = env.step(ctl(obs))
+        if term:
+            break
+    assert info["steps_completed"] == 0
+
+
+def test_start_phase_stays_off_mid_stride():
+    ctl = controller_from(TEACHER)
+    _, phases = _first_step(ctl, {})
+    assert all(p is None for p in phases)
+
+
+def test_a_batch_call_refuses_a_stateful_controller():
+    with pytest.raises(ValueError, match="start phase"):
+        controller_from(TEACHER)(np.zeros((2, 24)))
+
+
+def test_evaluate_takes_the_start(tmp_path):
+    from training import evaluate
+
+    rc = evaluate.main([str(POLICY), "--episodes", "1", "--start", "rest", "--out", str(tmp_path)])
+    assert rc == 0
+    summary = json.loads((tmp_path / "evaluation.json").read_text())
+    assert summary["start"] == "rest"
+    (row,) = summary["results"]
+    assert "rest start" in row["controller"] and "initiation" in row
+    assert (tmp_path / "figures" / "rest_start_network.png").is_file()
