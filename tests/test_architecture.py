@@ -34,6 +34,7 @@ LAYERS = [
     "starts",
     "rewards",
     "observation",
+    "reference",
     "period",
     "env",
     "vector_env",
