@@ -15,6 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .actions import TORQUE_LIMIT_NM, action_config, check_action_settings, validate_action
+from .clock import ContactClock
 from .model import N_ACTUATED, BipedParams, paper_biped
 from .modes import EventCode
 from .observation import observation_space
@@ -38,7 +39,7 @@ from .starts import (
 )
 from .state import STATUS_NONFINITE, STATUS_TERMINATED
 from .tasks import resolve_options, resolve_task
-from .validation import check_names
+from .validation import check_bool, check_names
 
 
 class ConstrainedBipedEnv(gym.Env):
@@ -90,6 +91,10 @@ class ConstrainedBipedEnv(gym.Env):
     | 21 | stance toe vertical force (F_R in models 1, 4) | -1e5 | 1e5 | N |
     | 22 | stance heel vertical force (F_L in models 1, 4; 0 in 2, 3) | -1e5 | 1e5 | N |
     | 23 | point-contact normal force f_n (models 3, 4; else 0) | -1e5 | 1e5 | N |
+
+    With ``phase_obs=True`` two entries follow (:mod:`.clock`): 24, the first-step flag (1
+    from a start at rest until its first step completes), and 25, the time in the current
+    model [s] (counted in control periods, clipped to 2 s): ``Box((26,))``.
 
     The bounds are the named constants ``OBS_RATE_LIMIT_RAD_S``, ``OBS_LENGTH_LIMIT_M``,
     ``OBS_SPEED_LIMIT_M_S`` and ``OBS_FORCE_LIMIT_N``; values beyond them (far outside walking)
@@ -159,6 +164,7 @@ class ConstrainedBipedEnv(gym.Env):
     | reset_noise_scale | 0.01 | | uniform noise on q1..q5 [rad] |
     | fall_hip_height_m | None | | end the episode when the hip is below [m] |
     | posture | NOMINAL_POSTURE_RAD | | start posture of ``start="rest"`` [rad] |
+    | phase_obs | False | | append the contact clock's phase (below) to the observation |
     | render_mode | None | | "rgb_array" or "human" |
 
     ## Version History
@@ -167,7 +173,10 @@ class ConstrainedBipedEnv(gym.Env):
       (the walking task integrates RK4 x 4 per 5 ms, the documented 1.25 ms, not x 16).
       Changed: the default preset is error-controlled RK4_LIMEX (``"rk4_limex_adaptive"``,
       ``step_tol`` 2e-4, steps up to the control period), in place of RK4 x 16; the fixed-step
-      RK4_LIMEX x 8 per 20 ms is ``preset="fixed_step"``. Added: ``step_tol``.
+      RK4_LIMEX x 8 per 20 ms is ``preset="fixed_step"``. Added: ``step_tol``. Changed: every
+      argument is checked by name (no silent coercion), ``step()`` before ``reset()`` or after
+      an episode's end raises, a start drawn below the ground is drawn again. Added:
+      ``start="mixed"``, ``phase_obs``; the batched env's ``num_threads`` (default 1).
 
     Example:
         >>> import gymnasium as gym
@@ -206,6 +215,7 @@ class ConstrainedBipedEnv(gym.Env):
         fall_hip_height_m: float | None = None,
         posture=NOMINAL_POSTURE_RAD,
         start: str | None = None,
+        phase_obs: bool = False,
         render_mode: str | None = None,
         **unknown: Any,
     ):
@@ -252,7 +262,8 @@ class ConstrainedBipedEnv(gym.Env):
         self.action_space = spaces.Box(
             -self.torque_limit_nm, self.torque_limit_nm, (N_ACTUATED,), np.float32
         )
-        self.observation_space = observation_space()
+        self.phase_obs = check_bool("phase_obs", phase_obs)
+        self.observation_space = observation_space(self.phase_obs)
         self._buf = EnvBuffers(
             1,
             self.params,
@@ -264,6 +275,7 @@ class ConstrainedBipedEnv(gym.Env):
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
         self._needs_reset = True  # until a reset succeeds, and again after a termination
+        self._clock = ContactClock(1, self.dt) if self.phase_obs else None
 
     # ---------------------------------------------------------------- state access
     @property
@@ -292,10 +304,12 @@ class ConstrainedBipedEnv(gym.Env):
             )  # fmt: skip
         self._needs_reset = False
         self._observe()
+        if self._clock is not None:
+            self._clock.start(np.zeros(1, np.int64), self._sim.ist[:1, 0], self._sim.qd[:1])
         info = self._info((), (0.0,) * len(REWARD_TERMS), None)
         if self.render_mode == "human":
             self.render()
-        return self._obs[0].copy(), info
+        return self._observation(), info
 
     def step(self, action):
         """Apply the torques for one control period (see the class docstring)."""
@@ -327,7 +341,16 @@ class ConstrainedBipedEnv(gym.Env):
             self._needs_reset = True
         if self.render_mode == "human":
             self.render()
+        if self._clock is not None:
+            self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
+            return self._observation(), reward, reason is not None, False, info
         return buf.obs[0].copy(), reward, reason is not None, False, info
+
+    def _observation(self) -> np.ndarray:
+        """The observation (with the phase entries when ``phase_obs``)."""
+        if self._clock is None:
+            return self._obs[0].copy()
+        return np.concatenate([self._obs[0], self._clock.features()[0]])
 
     def _observe(self) -> None:
         self._buf.observe()

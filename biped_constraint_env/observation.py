@@ -6,6 +6,7 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
+from .clock import PHASE_HIGH, PHASE_LOW
 from .hybrid import nb_wrap
 from .jit import njit_noalloc
 from .kinematics import NK, nb_hip_kinematics
@@ -106,6 +107,13 @@ def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
         )
 
 
-def observation_space() -> spaces.Box:
-    """The observation Box (bounds in the env docstring's table)."""
-    return spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float64)
+def observation_space(phase_obs: bool = False) -> spaces.Box:
+    """The observation Box (bounds in the env docstring's table).
+
+    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended.
+    """
+    if not phase_obs:
+        return spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float64)
+    low = np.concatenate([OBS_LOW, PHASE_LOW])
+    high = np.concatenate([OBS_HIGH, PHASE_HIGH])
+    return spaces.Box(low, high, dtype=np.float64)

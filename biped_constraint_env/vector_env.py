@@ -19,6 +19,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .actions import action_config, validate_actions
+from .clock import ContactClock
 from .env import ConstrainedBipedEnv
 from .model import N_ACTUATED
 from .period import EnvBuffers
@@ -104,6 +105,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self.num_threads = num_threads
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._needs_reset = True  # until the first reset succeeds
+        self._clock = ContactClock(num_envs, self.dt) if p.phase_obs else None
         self._elapsed = np.zeros(num_envs, np.int64)
         self._autoreset = np.zeros(num_envs, bool)
         self._rngs: list[np.random.Generator] = [
@@ -117,6 +119,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self.params, self.options, self._sim, idx, [self._rngs[i] for i in idx], p.start,
             p.posture, p.reset_noise_scale,
         )  # fmt: skip
+        if self._clock is not None:
+            self._clock.start(idx, self._sim.ist[idx, 0], self._sim.qd[idx])
         self._elapsed[idx] = 0
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
@@ -137,13 +141,16 @@ class ConstrainedBipedVectorEnv(VectorEnv):
                     i, state, evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
                 )
             self._elapsed[:] = 0
+            if self._clock is not None:
+                every = np.arange(self.num_envs)
+                self._clock.start(every, self._sim.ist[:, 0], self._sim.qd)
         else:
             self._reset_slots(np.arange(self.num_envs))
         self._autoreset[:] = False
         self._fell = np.zeros(self.num_envs, bool)
         self._observe()
         self._needs_reset = False
-        return self._obs.copy(), self._infos(np.zeros(self.num_envs), None)
+        return self._observation(), self._infos(np.zeros(self.num_envs), None)
 
     def step(self, actions):
         """Step every sub-environment (autoreset on the step after an episode ends)."""
@@ -166,6 +173,10 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             raise AssertionError(f"the compiled torque check refused validated torques {tau}")
         buf.sim.status[resetting] = 0
         buf.sim.n_events[resetting] = 0
+        if self._clock is not None:
+            stepped = np.ones(self.num_envs, bool)
+            stepped[resetting] = False
+            self._clock.advance(buf.sim.ist[:, 0], buf.sim.ist[:, 2], stepped)
         status = buf.sim.status
         fell = buf.fell.astype(bool)
         terminated = (status > 0) | fell
@@ -179,14 +190,16 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
         infos = self._infos(np.zeros(self.num_envs), parts)
         done = np.flatnonzero(terminated | truncated)
+        obs = self._observation()
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:
             final_obs = np.full(self.num_envs, None, dtype=object)
             final_info = np.full(self.num_envs, None, dtype=object)
             for i in done:
-                final_obs[i] = self._obs[i].copy()
+                final_obs[i] = obs[i].copy()
                 final_info[i] = {k: v[i] for k, v in infos.items() if not k.startswith("_")}
             self._reset_slots(done)
             self._observe()
+            obs = self._observation()
             mask = np.zeros(self.num_envs, bool)
             mask[done] = True
             infos.update(
@@ -194,7 +207,13 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             )
         else:
             self._autoreset = terminated | truncated
-        return self._obs.copy(), rewards, terminated, truncated, infos
+        return obs, rewards, terminated, truncated, infos
+
+    def _observation(self) -> np.ndarray:
+        """The observations (with the phase entries when ``phase_obs``)."""
+        if self._clock is None:
+            return self._obs.copy()
+        return np.concatenate([self._obs, self._clock.features()], axis=1)
 
     def _observe(self) -> None:
         self._buf.observe()

@@ -33,6 +33,7 @@ LAYERS = [
     "actions",
     "starts",
     "rewards",
+    "clock",
     "observation",
     "reference",
     "period",

@@ -84,3 +84,52 @@ def test_evaluate_takes_the_start(tmp_path):
     (row,) = summary["results"]
     assert "rest start" in row["controller"] and "initiation" in row
     assert (tmp_path / "figures" / "rest_start_network.png").is_file()
+
+
+SEED = 2  # start="mixed" draws rest, rest, mid-stride for seeds 2, 3, 4 (checked in the test)
+
+
+def test_phase_observation_single_equals_batched_and_follows_the_clock():
+    n, periods = 3, 400
+    kw = {"start": "mixed", "phase_obs": True}
+    venv = gym.make_vec(
+        "ConstrainedBiped-v0", num_envs=n, vectorization_mode="vector_entry_point", **kw
+    )
+    assert venv.single_observation_space.shape == (26,)
+    obs_b, _ = venv.reset(seed=SEED)
+    singles = [gym.make("ConstrainedBiped-v0", **kw) for _ in range(n)]
+    obs_s = np.array([e.reset(seed=SEED + i)[0] for i, e in enumerate(singles)])
+    ctls = [controller_from(TEACHER) for _ in range(n)]
+    np.testing.assert_array_equal(obs_b, obs_s)
+    flags = [obs_s[:, 24].copy()]
+    for _ in range(periods):
+        acts = np.array([c(o) for c, o in zip(ctls, obs_s, strict=True)])
+        obs_b, *_ = venv.step(acts)
+        obs_s = np.array([e.step(a)[0] for e, a in zip(singles, acts, strict=True)])
+        np.testing.assert_array_equal(obs_b, obs_s)
+        flags.append(obs_s[:, 24].copy())
+        assert np.all(obs_s[:, 25] >= 0)
+    flags = np.array(flags)
+    rest = [i for i in range(n) if flags[0, i] == 1]
+    assert 0 < len(rest) < n, "the seeds of start='mixed' here include both starts"
+    for i in rest:  # the flag ends with the first step (about 1.45 s in)
+        assert flags[-1, i] == 0 and np.all(np.diff(flags[:, i]) <= 0)
+
+
+def test_phase_clock_restarts_at_each_switch():
+    env = gym.make("ConstrainedBiped-v0", start="rest", phase_obs=True)
+    ctl = controller_from(TEACHER)
+    obs, info = env.reset(seed=0)
+    ctl.reset()
+    assert obs[24] == 1.0 and obs[25] == 0.0
+    mode = info["mode"]
+    for _ in range(600):
+        before = obs[25]
+        obs, _, term, _, info = env.step(ctl(obs))
+        assert not term
+        if info["mode"] != mode:
+            assert obs[25] == 0.0
+        else:
+            assert obs[25] == pytest.approx(min(before + 0.005, 2.0))
+        mode = info["mode"]
+        assert obs[24] == (info["steps_completed"] == 0)

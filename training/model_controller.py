@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
+from biped_constraint_env.clock import AT_REST_RATE_RAD_S
 from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode
@@ -122,10 +123,6 @@ def state_from_obs(obs: np.ndarray) -> SimState:
     if mode in (1, 4):
         q[0] = qd[0] = 0.0
     return SimState(0.0, Mode(mode), int(round(obs[_I["stance_side"]])), q, qd)
-
-
-AT_REST_RATE_RAD_S = 1e-3
-"""A model-1 state whose joint rates are all below this [rad/s] is at rest: a start."""
 
 
 def _checked_gains(gains: dict[str, float] | None, what: str) -> dict[str, float]:

@@ -23,6 +23,7 @@ class PPOConfig:
     start: str = "midstride"  # the env's start: "midstride", "rest" (Fig. 2) or "mixed" (both)
     dt: float = 0.0  # the env's control period [s] (0: the task's, 5 ms for "walk")
     hold_torques: bool = False  # hold the action through model switches (stop_at_switch off)
+    phase_obs: bool = False  # observe the contact clock: first-step flag, time in the model
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
     total_timesteps: int = 3_000_000  # env steps of PPO in all (a resumed run keeps its own)
     n_envs: int = 16  # environments stepped together (one compiled batch with vec="batched")
@@ -91,6 +92,7 @@ class PPOConfig:
             **({"fall_hip_height_m": self.fall_hip_height_m} if self.fall_hip_height_m > 0 else {}),
             **({"dt": self.dt} if self.dt > 0 else {}),
             **({"stop_at_switch": False} if self.hold_torques else {}),
+            **({"phase_obs": True} if self.phase_obs else {}),
         }
 
     def action_map(self):
@@ -99,6 +101,12 @@ class PPOConfig:
 
         gear = self.gear[0] if len(self.gear) == 1 else self.gear
         return action_map_from(self.base_controller, gear)
+
+    def obs_dim(self) -> int:
+        """The observation's length (24, or 26 with the phase entries)."""
+        from biped_constraint_env.observation import observation_space
+
+        return observation_space(self.phase_obs).shape[0]
 
     def policy_kwargs(self) -> dict:
         """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.
@@ -112,9 +120,10 @@ class PPOConfig:
         if self.teacher:
             from training.imitation import FixedNormalizer
 
+            n = self.obs_dim()
             kw.update(
                 features_extractor_class=FixedNormalizer,
-                features_extractor_kwargs={"mean": [0.0] * 24, "var": [1.0] * 24},
+                features_extractor_kwargs={"mean": [0.0] * n, "var": [1.0] * n},
             )
         return kw
 

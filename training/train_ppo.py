@@ -96,7 +96,8 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
         st = load_state(where)
         with np.load(where / "data.npz", allow_pickle=False) as z:
             data = imitation.Dataset(z["obs"], z["act"])
-        model = make_model(np.zeros(24), np.ones(24))  # the statistics come with the weights
+        n = cfg.obs_dim()  # the statistics come with the weights
+        model = make_model(np.zeros(n), np.ones(n))
         load_weights(model.policy, where)
         rng.bit_generator.state = st["rng"]
         k0, seed, rows, t0 = st["round"], st["seed"], st["rows"], t0 - st["wall_s"]
@@ -431,7 +432,8 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
     demos = None
     if resuming:
         where = find_snapshot(run, "checkpoint")
-        model = make_model(cfg, vecnorm, run, np.zeros(24), np.ones(24))
+        n = cfg.obs_dim()
+        model = make_model(cfg, vecnorm, run, np.zeros(n), np.ones(n))
         load_weights(model.policy, where)
         load_optimizer(model.policy, where)
         restore_normalizer(vecnorm, where)
@@ -440,7 +442,8 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
         best = max(best, state.get("best", -np.inf))
         print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
     elif cfg.teacher and available(run, "imitation"):
-        model = make_model(cfg, vecnorm, run, np.zeros(24), np.ones(24))
+        n = cfg.obs_dim()
+        model = make_model(cfg, vecnorm, run, np.zeros(n), np.ones(n))
         load_weights(model.policy, find_snapshot(run, "imitation"))
         print("starting PPO from the run's imitation result", flush=True)
     elif cfg.teacher:

@@ -1,0 +1,66 @@
+"""The contact clock of N environments, and the phase observation it gives (``phase_obs``).
+
+Per environment: whether a start at rest is still walking its first step, the model, and the
+control periods since that model began (restarting at every model switch). With
+``phase_obs=True`` the observation appends :data:`PHASE_NAMES`: the first-step flag (1 from a
+start at rest until the first step completes) and the time in the current model [s], counted
+in control periods and clipped to :data:`MODEL_TIME_MAX_S`. Both envs keep it with this class,
+so the single and the batched env observe the same numbers.
+
+Why: a controller that starts from rest moves differently in its first step than in the gait
+(biped_constraint_env's model-based teacher has gains of its own until the legs first swap);
+without the flag, states of the first step and of the gait can look alike and a network that
+imitates the teacher cannot tell which it is in.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+AT_REST_RATE_RAD_S = 1e-3
+"""A model-1 start whose joint rates are all below this [rad/s] is a start at rest."""
+MODEL_TIME_MAX_S = 2.0
+"""The observed time in the current model is clipped to this [s]."""
+PHASE_NAMES = ("first_step", "model_time_s")
+"""The entries ``phase_obs`` appends to the observation."""
+PHASE_LOW = np.array([0.0, 0.0])
+PHASE_HIGH = np.array([1.0, MODEL_TIME_MAX_S])
+
+
+class ContactClock:
+    """First-step flags, models and periods since each model began, for N environments."""
+
+    def __init__(self, n: int, dt: float):
+        """Clocks for ``n`` environments with control period ``dt`` [s]."""
+        self.dt = float(dt)
+        self.first = np.zeros(n, bool)
+        self.mode = np.ones(n, np.int64)
+        self.j = np.zeros(n, np.int64)
+
+    def start(self, idx: np.ndarray, modes: np.ndarray, qd: np.ndarray) -> None:
+        """Slots ``idx`` start in ``modes`` with joint rates ``qd`` (len(idx), 6)."""
+        modes = np.asarray(modes)
+        rest = (modes == 1) & np.all(np.abs(qd) < AT_REST_RATE_RAD_S, axis=1)
+        self.first[idx] = rest
+        self.mode[idx] = modes
+        self.j[idx] = 0
+
+    def advance(self, modes_after: np.ndarray, steps_after: np.ndarray, stepped=None) -> None:
+        """Move the clocks past a period, given each environment's model and completed steps.
+
+        ``stepped`` (bool mask, default all) marks the environments stepped in the period.
+        """
+        same = modes_after == self.mode
+        j = np.where(same, self.j + 1, 0)
+        first = self.first & (steps_after == 0)
+        if stepped is None:
+            self.j, self.first = j, first
+            self.mode = np.asarray(modes_after, np.int64).copy()
+        else:
+            self.j[stepped], self.first[stepped] = j[stepped], first[stepped]
+            self.mode[stepped] = modes_after[stepped]
+
+    def features(self) -> np.ndarray:
+        """(n, 2): the first-step flag and the time in the current model [s] (clipped)."""
+        t = np.minimum(self.j * self.dt, MODEL_TIME_MAX_S)
+        return np.stack([self.first.astype(np.float64), t], axis=1)
