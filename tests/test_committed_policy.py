@@ -37,14 +37,16 @@ def test_committed_walker_is_a_network_alone_and_deterministic():
     assert isinstance(policy.features_extractor, FixedNormalizer)
     assert not norm.enabled  # the network normalises its own input
     assert state["num_timesteps"] > 0
+    assert cfg.start == "mixed" and cfg.phase_obs  # trained from rest and mid-stride
     actor = policy_actor(policy, norm, cfg)
-    obs = np.zeros(24)
+    obs = np.zeros(cfg.obs_dim())
     obs[18] = 1.0
     np.testing.assert_array_equal(actor(obs), actor(obs))
-    # one seeded evaluation episode (the README's seeds 0-9) walks at least 10 steps
-    (ep,) = run_episodes(actor, cfg.env_kwargs(), [0], cfg.env_id)
-    assert ep["steps_completed"] >= 10, ep
-    assert ep["distance_m"] > 5.0
+    # one seeded evaluation episode (the README's seeds 0-9) from each start walks >= 10 steps
+    for start in ("midstride", "rest"):
+        (ep,) = run_episodes(actor, {**cfg.env_kwargs(), "start": start}, [0], cfg.env_id)
+        assert ep["steps_completed"] >= 10, (start, ep)
+        assert ep["distance_m"] > 5.0
 
 
 def test_loading_a_policy_never_unpickles(monkeypatch, tmp_path):
