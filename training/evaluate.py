@@ -304,8 +304,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{i['t_first_step_s_max']:.2f} | {i['first_step_m_mean']:.2f} | "
                 f"{i['steps_to_90pct_speed_mean']:.1f}, {i['steps_to_90pct_speed_max']} |"
             )
+    names = ["best.gif", "best_strip.png", "worst_strip.png"]
+    if args.compare or start == "rest":
+        names.append("rest_start_network.png")
+    if args.compare:
+        names.append("rest_start_teacher.png")
     print(
-        f"\nfigures: {out_dir / 'figures'} (best.gif, best_strip.png, worst_strip.png); "
+        f"\nfigures: {out_dir / 'figures'} ({', '.join(names)}); "
         f"summary: {out_dir / 'evaluation.json'}; {time.time() - t0:.0f} s"
     )
     return 0
