@@ -21,6 +21,18 @@ AT_REST_RATE_RAD_S = 1e-3
 """A model-1 start whose joint rates are all below this [rad/s] is a start at rest."""
 MODEL_TIME_MAX_S = 2.0
 """The observed time in the current model is clipped to this [s]."""
+
+
+def at_rest(modes, qd) -> np.ndarray:
+    """Which states are starts at rest: model 1, every joint rate below AT_REST_RATE_RAD_S.
+
+    ``modes`` (n,) and ``qd`` (n, 6), or one state's mode and (6,) rates (then a 0-d array).
+    The env's first-step flag and the model-based teacher's start phase both use it.
+    """
+    qd = np.asarray(qd)
+    return (np.asarray(modes) == 1) & np.all(np.abs(qd) < AT_REST_RATE_RAD_S, axis=-1)
+
+
 PHASE_NAMES = ("first_step", "model_time_s")
 """The entries ``phase_obs`` appends to the observation."""
 PHASE_LOW = np.array([0.0, 0.0])
@@ -39,9 +51,7 @@ class ContactClock:
 
     def start(self, idx: np.ndarray, modes: np.ndarray, qd: np.ndarray) -> None:
         """Slots ``idx`` start in ``modes`` with joint rates ``qd`` (len(idx), 6)."""
-        modes = np.asarray(modes)
-        rest = (modes == 1) & np.all(np.abs(qd) < AT_REST_RATE_RAD_S, axis=1)
-        self.first[idx] = rest
+        self.first[idx] = at_rest(modes, qd)
         self.mode[idx] = modes
         self.j[idx] = 0
 

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from biped_constraint_env.clock import AT_REST_RATE_RAD_S
+from biped_constraint_env.clock import at_rest as _at_rest
 from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode
@@ -135,8 +135,8 @@ def _checked_gains(gains: dict[str, float] | None, what: str) -> dict[str, float
 
 
 def at_rest(state: SimState) -> bool:
-    """Whether a state is a start at rest (model 1, every joint rate below AT_REST_RATE_RAD_S)."""
-    return int(state.mode) == 1 and bool(np.all(np.abs(state.qd) < AT_REST_RATE_RAD_S))
+    """Whether a state is a start at rest (:func:`biped_constraint_env.clock.at_rest`)."""
+    return bool(_at_rest(int(state.mode), state.qd))
 
 
 class ModelController:
