@@ -39,7 +39,11 @@ from .starts import (
 )
 from .state import STATUS_NONFINITE, STATUS_TERMINATED
 from .tasks import resolve_options, resolve_task
+from .tracking import PD_RANGE_RAD, TRACKING_TERMS, Tracking, check_tracking_settings
 from .validation import check_bool, check_names
+
+TRACK_KEYS = tuple(f"track_{t}" for t in TRACKING_TERMS)
+"""The tracking reward's terms in ``info`` (``reward="tracking"``)."""
 
 
 class ConstrainedBipedEnv(gym.Env):
@@ -216,6 +220,14 @@ class ConstrainedBipedEnv(gym.Env):
         posture=NOMINAL_POSTURE_RAD,
         start: str | None = None,
         phase_obs: bool = False,
+        reward: str = "env",
+        reference: str | None = None,
+        rsi: float = 0.0,
+        action: str = "torque",
+        pd_around: str = "fixed",
+        pd_range: float = PD_RANGE_RAD,
+        reference_obs: bool = False,
+        pd_gain_scale: float = 1.0,
         render_mode: str | None = None,
         **unknown: Any,
     ):
@@ -259,11 +271,17 @@ class ConstrainedBipedEnv(gym.Env):
             )
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
-        self.action_space = spaces.Box(
-            -self.torque_limit_nm, self.torque_limit_nm, (N_ACTUATED,), np.float32
-        )
+        self.tracking_settings = check_tracking_settings(
+            self.start, reward, reference, rsi, action, pd_around, pd_range, reference_obs,
+            pd_gain_scale,
+        )  # fmt: skip
+        ts = self.tracking_settings
+        self.pd_action = ts["action"] == "pd"
+        bound = 1.0 if self.pd_action else self.torque_limit_nm
+        self.action_space = spaces.Box(-bound, bound, (N_ACTUATED,), np.float32)
         self.phase_obs = check_bool("phase_obs", phase_obs)
-        self.observation_space = observation_space(self.phase_obs)
+        self.reference_obs = ts["reference_obs"]
+        self.observation_space = observation_space(self.phase_obs, self.reference_obs)
         self._buf = EnvBuffers(
             1,
             self.params,
@@ -275,7 +293,8 @@ class ConstrainedBipedEnv(gym.Env):
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
         self._needs_reset = True  # until a reset succeeds, and again after a termination
-        self._clock = ContactClock(1, self.dt) if self.phase_obs else None
+        self._clock, self.tracking = make_clock_and_tracking(1, self)
+        self._track_reward = self.tracking_settings["reward"] == "tracking"
 
     # ---------------------------------------------------------------- state access
     @property
@@ -292,21 +311,29 @@ class ConstrainedBipedEnv(gym.Env):
         """Start an episode (see the class docstring, Starting State)."""
         super().reset(seed=seed)
         self._needs_reset = True  # stays so if this reset is refused
+        slot = np.zeros(1, np.int64)
         if options is not None and not (isinstance(options, dict) and not options):
             state = state_from_options(options)
             check_start_state(self.params, state)
             forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
             self._sim.set(0, state, forces)
+            start_clocks(self._clock, self.tracking, slot, self._sim)
+        elif self.tracking is not None and self.tracking.ref is not None:
+            self.tracking.draw_starts(
+                self.params, self.options, self._sim, slot, [self.np_random], self.start,
+                self.posture, self.reset_noise_scale,
+            )  # fmt: skip
         else:
             draw_starts(
-                self.params, self.options, self._sim, np.zeros(1, np.int64), [self.np_random],
-                self.start, self.posture, self.reset_noise_scale,
+                self.params, self.options, self._sim, slot, [self.np_random], self.start,
+                self.posture, self.reset_noise_scale,
             )  # fmt: skip
+            start_clocks(self._clock, None, slot, self._sim)
         self._needs_reset = False
         self._observe()
-        if self._clock is not None:
-            self._clock.start(np.zeros(1, np.int64), self._sim.ist[:1, 0], self._sim.qd[:1])
         info = self._info((), (0.0,) * len(REWARD_TERMS), None)
+        if self._track_reward:
+            info.update(dict.fromkeys(TRACK_KEYS, 0.0))
         if self.render_mode == "human":
             self.render()
         return self._observation(), info
@@ -322,6 +349,10 @@ class ConstrainedBipedEnv(gym.Env):
                     "step() called before reset() or after the episode ended; call reset()"
                 )
             validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises if invalid
+        if self.pd_action:  # PD targets in [-1, 1] -> torques [N m]
+            a = validate_action(a, 1.0, self.out_of_range)
+            a = self.tracking.torques(a[None, :], sim.q[:1], sim.qd[:1])[0]
+        steps0 = sim.ist[0, 2]
         buf.act[0] = a  # as float64; checked (and clipped) in the compiled period
         if buf.period():
             validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises its ValueError
@@ -341,16 +372,25 @@ class ConstrainedBipedEnv(gym.Env):
             self._needs_reset = True
         if self.render_mode == "human":
             self.render()
-        if self._clock is not None:
-            self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
-            return self._observation(), reward, reason is not None, False, info
-        return buf.obs[0].copy(), reward, reason is not None, False, info
+        if self.pd_action:
+            info["torque"] = buf.act[0].copy()
+        if self._clock is None:
+            return buf.obs[0].copy(), reward, reason is not None, False, info
+        self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
+        if self._track_reward:
+            track = self.tracking.reward(
+                sim.q[:1], sim.qd[:1], self._hip[:1], sim.ist[:1, 2] - steps0,
+                np.array([reason is None]),
+            )[0]  # fmt: skip
+            info.update(zip(TRACK_KEYS, track[:-1].tolist(), strict=True))
+            reward = float(track[-1])
+        return self._observation(), reward, reason is not None, False, info
 
     def _observation(self) -> np.ndarray:
-        """The observation (with the phase entries when ``phase_obs``)."""
+        """The observation (with the phase and reference entries when asked for)."""
         if self._clock is None:
             return self._obs[0].copy()
-        return np.concatenate([self._obs[0], self._clock.features()[0]])
+        return observations(self._obs, self._clock, self.tracking, self)[0]
 
     def _observe(self) -> None:
         self._buf.observe()
@@ -405,6 +445,40 @@ class ConstrainedBipedEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def make_clock_and_tracking(n: int, env: ConstrainedBipedEnv):
+    """The contact clock (or None) and :class:`~.tracking.Tracking` (or None) of ``n`` envs.
+
+    A clock is kept when the phase is observed or a tracking option needs the reference; the
+    tracking object when one does, or for PD-target actions.
+    """
+    ts = env.tracking_settings
+    needs_clock = env.phase_obs or ts["needs_reference"]
+    clock = ContactClock(n, env.dt) if needs_clock else None
+    tracking = None
+    if ts["needs_reference"] or ts["action"] == "pd":
+        tracking = Tracking(n, ts, env.torque_limit_nm, clock)
+    return clock, tracking
+
+
+def start_clocks(clock, tracking, idx: np.ndarray, sim) -> None:
+    """Start the clocks of slots ``idx`` at their current states (placed on the reference)."""
+    if clock is None:
+        return
+    clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
+    if tracking is not None and tracking.ref is not None:
+        tracking.place(idx, sim)
+
+
+def observations(obs: np.ndarray, clock, tracking, env) -> np.ndarray:
+    """(n, dim) observations: base, phase (``phase_obs``), reference (``reference_obs``)."""
+    parts = [obs]
+    if env.phase_obs:
+        parts.append(clock.features())
+    if env.reference_obs:
+        parts.append(tracking.observation())
+    return np.concatenate(parts, axis=1) if len(parts) > 1 else obs.copy()
 
 
 ENV_ARGUMENTS: tuple[str, ...] = tuple(

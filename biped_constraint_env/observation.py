@@ -107,13 +107,22 @@ def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
         )
 
 
-def observation_space(phase_obs: bool = False) -> spaces.Box:
+N_REFERENCE_OBS = 2 * N_LINKS
+"""Entries ``reference_obs`` appends (:mod:`.tracking`): the reference's q and q-dot."""
+
+
+def observation_space(phase_obs: bool = False, reference_obs: bool = False) -> spaces.Box:
     """The observation Box (bounds in the env docstring's table).
 
-    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended.
+    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended, then with
+    ``reference_obs`` the reference's q (6, +-pi) and q-dot (6, +-OBS_RATE_LIMIT_RAD_S).
     """
-    if not phase_obs:
-        return spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float64)
-    low = np.concatenate([OBS_LOW, PHASE_LOW])
-    high = np.concatenate([OBS_HIGH, PHASE_HIGH])
-    return spaces.Box(low, high, dtype=np.float64)
+    low, high = [OBS_LOW], [OBS_HIGH]
+    if phase_obs:
+        low.append(PHASE_LOW)
+        high.append(PHASE_HIGH)
+    if reference_obs:
+        ref_high = np.concatenate([np.full(N_LINKS, np.pi), np.full(N_LINKS, OBS_RATE_LIMIT_RAD_S)])
+        low.append(-ref_high)
+        high.append(ref_high)
+    return spaces.Box(np.concatenate(low), np.concatenate(high), dtype=np.float64)

@@ -19,8 +19,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .actions import action_config, validate_actions
-from .clock import ContactClock
-from .env import ConstrainedBipedEnv
+from .env import (
+    TRACK_KEYS,
+    ConstrainedBipedEnv,
+    make_clock_and_tracking,
+    observations,
+    start_clocks,
+)
 from .model import N_ACTUATED
 from .period import EnvBuffers
 from .rewards import REWARD_TERMS, TERMINATION_FALL, TERMINATION_NON_FINITE, reward_config
@@ -105,7 +110,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self.num_threads = num_threads
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._needs_reset = True  # until the first reset succeeds
-        self._clock = ContactClock(num_envs, self.dt) if p.phase_obs else None
+        self._clock, self.tracking = make_clock_and_tracking(num_envs, p)
+        self._track_reward = p.tracking_settings["reward"] == "tracking"
+        self._pd = p.pd_action
         self._elapsed = np.zeros(num_envs, np.int64)
         self._autoreset = np.zeros(num_envs, bool)
         self._rngs: list[np.random.Generator] = [
@@ -115,12 +122,18 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def _reset_slots(self, idx: np.ndarray) -> None:
         """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
         p = self._proto
-        draw_starts(
-            self.params, self.options, self._sim, idx, [self._rngs[i] for i in idx], p.start,
-            p.posture, p.reset_noise_scale,
-        )  # fmt: skip
-        if self._clock is not None:
-            self._clock.start(idx, self._sim.ist[idx, 0], self._sim.qd[idx])
+        rngs = [self._rngs[i] for i in idx]
+        if self.tracking is not None and self.tracking.ref is not None:
+            self.tracking.draw_starts(
+                self.params, self.options, self._sim, idx, rngs, p.start, p.posture,
+                p.reset_noise_scale,
+            )  # fmt: skip
+        else:
+            draw_starts(
+                self.params, self.options, self._sim, idx, rngs, p.start, p.posture,
+                p.reset_noise_scale,
+            )  # fmt: skip
+            start_clocks(self._clock, None, idx, self._sim)
         self._elapsed[idx] = 0
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
@@ -141,9 +154,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
                     i, state, evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
                 )
             self._elapsed[:] = 0
-            if self._clock is not None:
-                every = np.arange(self.num_envs)
-                self._clock.start(every, self._sim.ist[:, 0], self._sim.qd)
+            start_clocks(self._clock, self.tracking, np.arange(self.num_envs), self._sim)
         else:
             self._reset_slots(np.arange(self.num_envs))
         self._autoreset[:] = False
@@ -162,11 +173,17 @@ class ConstrainedBipedVectorEnv(VectorEnv):
                 f"actions must have shape ({self.num_envs}, {N_ACTUATED}), got {actions.shape}"
             )
         p = self._proto
-        tau = validate_actions(actions, p.torque_limit_nm, p.out_of_range)
+        buf = self._buf
+        if self._pd:
+            targets = validate_actions(actions, 1.0, p.out_of_range)
+        else:
+            tau = validate_actions(actions, p.torque_limit_nm, p.out_of_range)
         resetting = np.flatnonzero(self._autoreset)
         if resetting.size:
             self._reset_slots(resetting)
-        buf = self._buf
+        if self._pd:  # after the resets: the torques act from the states they answer
+            tau = self.tracking.torques(targets, buf.sim.q, buf.sim.qd)
+        steps0 = buf.sim.ist[:, 2].copy()
         buf.sim.status[resetting] = -1  # not stepped this period; zero reward
         buf.act[:] = tau
         if buf.period():  # the actions were validated above, so this cannot fail
@@ -183,20 +200,30 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._fell = fell
         parts = tuple(buf.rew[:, : len(REWARD_TERMS)].T.copy())  # one copy, a row per term
         rewards = buf.rew[:, -1].copy()
+        if self._track_reward:
+            track = self.tracking.reward(
+                buf.sim.q, buf.sim.qd, self._hip, buf.sim.ist[:, 2] - steps0, ~terminated
+            )
+            track[resetting] = 0.0  # not stepped this period
+            parts = parts + tuple(track[:, :-1].T.copy())
+            rewards = track[:, -1].copy()
         self._elapsed += 1
         self._elapsed[resetting] = 0
         truncated = np.zeros(self.num_envs, bool)
         if self.max_episode_steps is not None:
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
         infos = self._infos(np.zeros(self.num_envs), parts)
+        if self._pd:
+            infos.update(torque=tau.copy(), _torque=np.ones(self.num_envs, bool))
         done = np.flatnonzero(terminated | truncated)
         obs = self._observation()
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:
             final_obs = np.full(self.num_envs, None, dtype=object)
             final_info = np.full(self.num_envs, None, dtype=object)
+            keys = [k for k in infos if not k.startswith("_")]
             for i in done:
                 final_obs[i] = obs[i].copy()
-                final_info[i] = {k: v[i] for k, v in infos.items() if not k.startswith("_")}
+                final_info[i] = {k: infos[k][i] for k in keys}
             self._reset_slots(done)
             self._observe()
             obs = self._observation()
@@ -210,10 +237,10 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         return obs, rewards, terminated, truncated, infos
 
     def _observation(self) -> np.ndarray:
-        """The observations (with the phase entries when ``phase_obs``)."""
+        """The observations (with the phase and reference entries when asked for)."""
         if self._clock is None:
             return self._obs.copy()
-        return np.concatenate([self._obs, self._clock.features()], axis=1)
+        return observations(self._obs, self._clock, self.tracking, self._proto)
 
     def _observe(self) -> None:
         self._buf.observe()
@@ -229,7 +256,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
                 reasons[i] = TERMINATION_NON_FINITE
             else:
                 reasons[i] = next(e.code.name.lower() for e in s.events_of(int(i)) if e.terminal)
-        parts = terms if terms is not None else (zeros,) * len(REWARD_TERMS)
+        keys = REWARD_TERMS + (TRACK_KEYS if self._track_reward else ())
+        parts = terms if terms is not None else (zeros,) * len(keys)
         mode, side, steps = s.ist[:, :3].T.copy()  # one copy, a row per entry
         info = {
             "mode": mode,
@@ -238,10 +266,12 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             "t": s.fst[:, 0].copy(),
             "hip_y": self._hip[:, 0].copy(),
             "termination_reason": reasons,
-            **dict(zip(REWARD_TERMS, parts, strict=True)),
+            **dict(zip(keys, parts, strict=True)),
         }
         everyone = np.ones(self.num_envs, bool)
         info.update(dict.fromkeys(_MASK_KEYS, everyone))
+        if self._track_reward:
+            info.update(dict.fromkeys((f"_{k}" for k in TRACK_KEYS), everyone))
         return info
 
     def close_extras(self, **kwargs: Any) -> None:

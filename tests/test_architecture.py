@@ -36,6 +36,7 @@ LAYERS = [
     "clock",
     "observation",
     "reference",
+    "tracking",
     "period",
     "env",
     "vector_env",

@@ -39,7 +39,22 @@ anything = st.one_of(
     st.none(),
     numbers,
     st.text(max_size=6),
-    st.sampled_from(["walk", "paper", "rest", "midstride", "default", "fast", "clip", "raise"]),
+    st.sampled_from(
+        [
+            "walk",
+            "paper",
+            "rest",
+            "midstride",
+            "default",
+            "fast",
+            "clip",
+            "raise",
+            "tracking",
+            "pd",
+            "fixed",
+            "reference",
+        ]
+    ),
     st.lists(numbers, max_size=7),
     st.dictionaries(st.text(max_size=3), numbers, max_size=2),
 )

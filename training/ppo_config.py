@@ -24,6 +24,16 @@ class PPOConfig:
     dt: float = 0.0  # the env's control period [s] (0: the task's, 5 ms for "walk")
     hold_torques: bool = False  # hold the action through model switches (stop_at_switch off)
     phase_obs: bool = False  # observe the contact clock: first-step flag, time in the model
+    reward: str = "env"  # the env's reward: "env" (its own) or "tracking" (of the reference)
+    reference: str = ""  # the reference motion ("" = the env's choice for the start)
+    rsi: float = 0.0  # fraction of training resets at reference states (never in evaluation)
+    action: str = "torque"  # the env's action: "torque" or "pd" (PD targets)
+    pd_around: str = "fixed"  # PD targets about the "fixed" rest pose or the "reference" pose
+    pd_range: float = 1.0  # half-range of the PD targets [rad]
+    pd_gain_scale: float = 1.0  # the PD gains' scale (Kp x it, Kd x its square root)
+    reference_obs: bool = False  # observe the reference's q and q-dot at the clock
+    train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
+    # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
     total_timesteps: int = 3_000_000  # env steps of PPO in all (a resumed run keeps its own)
     n_envs: int = 16  # environments stepped together (one compiled batch with vec="batched")
@@ -33,6 +43,8 @@ class PPOConfig:
     batch_size: int = 512  # PPO minibatch size
     n_epochs: int = 10  # PPO epochs per update
     learning_rate: float = 3e-4  # Adam learning rate of PPO
+    lr_schedule: str = "constant"  # "constant" or "linear" (decays to 0 at total_timesteps)
+    target_kl: float = 0.0  # > 0: stop an update's epochs when the KL exceeds 1.5 x this
     gamma: float = 0.99  # discount factor
     gae_lambda: float = 0.95  # GAE lambda
     clip_range: float = 0.2  # PPO clipping
@@ -44,6 +56,8 @@ class PPOConfig:
     torch_threads: int = 1  # torch threads (1: the env and torch do not fight for 2 cores)
     eval_freq: int = 100_000  # env steps between evaluations (they select best/)
     eval_episodes: int = 10  # episodes per evaluation, on the selection seeds
+    select_by: str = "mean"  # best/ is the evaluation with the most steps: "mean" or "min"
+    # (the fewest steps of its episodes first, then the mean)
     checkpoint_freq: int = 250_000  # env steps between checkpoints (resume continues there)
     reset_noise_scale: float = 0.01  # the env's reset noise [rad]
     fall_hip_height_m: float = 0.0  # > 0: end episodes when the hip is below it [m] (0 = off)
@@ -93,20 +107,56 @@ class PPOConfig:
             **({"dt": self.dt} if self.dt > 0 else {}),
             **({"stop_at_switch": False} if self.hold_torques else {}),
             **({"phase_obs": True} if self.phase_obs else {}),
+            **({"reward": self.reward} if self.reward != "env" else {}),
+            **({"reference": self.reference} if self.reference else {}),
+            **(
+                {
+                    "action": "pd",
+                    "pd_around": self.pd_around,
+                    "pd_range": self.pd_range,
+                    "pd_gain_scale": self.pd_gain_scale,
+                }  # fmt: skip
+                if self.action == "pd"
+                else {}
+            ),
+            **({"reference_obs": True} if self.reference_obs else {}),
         }
 
+    def train_env_kwargs(self) -> dict:
+        """Keyword arguments of the training env: :meth:`env_kwargs` with ``rsi``.
+
+        Evaluations use :meth:`env_kwargs`: the env's own start distribution.
+        """
+        return {**self.env_kwargs(), **({"rsi": self.rsi} if self.rsi > 0 else {})}
+
+    def train_max_episode_steps(self) -> int | None:
+        """The training episodes' time limit in control periods (None: the env's)."""
+        if self.train_episode_s <= 0:
+            return None
+        from biped_constraint_env.tasks import TASKS
+
+        dt = self.dt if self.dt > 0 else TASKS[self.task]["dt"]
+        return max(1, round(self.train_episode_s / dt))
+
     def action_map(self):
-        """Policy action -> torque (plain rescaling, or a residual on the base controller)."""
-        from training.sb3_vec import action_map_from
+        """Policy action -> env action.
+
+        Plain rescaling to torques, a residual on the base controller, or (``action="pd"``)
+        the PD targets in [-1, 1] as they are.
+        """
+        from training.sb3_vec import ActionMap, action_map_from
+
+        if self.action == "pd":
+            return ActionMap(1.0, None, 1.0)
 
         gear = self.gear[0] if len(self.gear) == 1 else self.gear
         return action_map_from(self.base_controller, gear)
 
     def obs_dim(self) -> int:
-        """The observation's length (24, or 26 with the phase entries)."""
+        """The observation's length (24; + 2 phase entries; + 12 reference entries)."""
         from biped_constraint_env.observation import observation_space
 
-        return observation_space(self.phase_obs).shape[0]
+        return observation_space(self.phase_obs, self.reference_obs).shape[0]
 
     def policy_kwargs(self) -> dict:
         """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.

@@ -85,7 +85,8 @@ def run_episodes(
                 pushed = True
             tau = actor(obs)
             obs, r, term, trunc, info = env.step(tau)
-            cost += float(np.sum(np.square(tau))) * (info["t"] - t_prev)
+            applied = info.get("torque", tau)  # PD-target actions: the torques they gave
+            cost += float(np.sum(np.square(applied))) * (info["t"] - t_prev)
             t_prev = info["t"]
             ret += r
             done = term or trunc

@@ -66,6 +66,7 @@ def make_sb3_vec_env(
     env_id: str = "ConstrainedBiped-v0",
     action_map=None,
     num_threads: int = 1,
+    max_episode_steps: int | None = None,
 ):
     """An SB3 VecEnv of ConstrainedBiped-v0 with actions in [-1, 1] (mapped to N m).
 
@@ -73,7 +74,8 @@ def make_sb3_vec_env(
     :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
     ``"dummy"``: DummyVecEnv (one process). ``action_map``: an :class:`ActionMap` (default:
     plain rescaling by the torque limit). ``num_threads``: numba threads of the batched env
-    (1 next to a torch process on 2 cores; see the vector env).
+    (1 next to a torch process on 2 cores; see the vector env). ``max_episode_steps``: the
+    episodes' time limit in control periods (None: the registration's).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
@@ -81,6 +83,7 @@ def make_sb3_vec_env(
 
     limit = float(env_kwargs.get("torque_limit_nm", TORQUE_LIMIT_NM))
     action_map = action_map or ActionMap(limit, limit=limit)
+    limit_kw = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
     if vec == "batched":
         from gymnasium.vector import AutoresetMode
 
@@ -90,6 +93,7 @@ def make_sb3_vec_env(
             vectorization_mode="vector_entry_point",
             autoreset_mode=AutoresetMode.SAME_STEP,
             num_threads=num_threads,
+            **limit_kw,
             **env_kwargs,
         )
         out = BatchedSB3VecEnv(venv, action_map)
@@ -98,7 +102,7 @@ def make_sb3_vec_env(
 
     def make(i):
         def thunk():
-            env = MappedAction(gym.make(env_id, **env_kwargs), action_map)
+            env = MappedAction(gym.make(env_id, **limit_kw, **env_kwargs), action_map)
             env.reset(seed=seed + i)
             return env
 

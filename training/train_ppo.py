@@ -315,6 +315,8 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
             for k in ("steps_mean", "distance_mean_m", "return_mean"):
                 self.logger.record(f"eval/{k}", row[k])
             score = float(steps.mean() + 1e-3 * dist.mean())
+            if cfg.select_by == "min":
+                score = float(steps.min() + 1e-3 * score)
             if score > self.best:
                 self.best = score
                 save_snapshot(
@@ -361,8 +363,12 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
     """
     from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import LinearSchedule
 
     policy_kwargs = cfg.policy_kwargs()
+    lr = cfg.learning_rate
+    if cfg.lr_schedule == "linear":
+        lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
     if cfg.teacher and mean is not None:
         policy_kwargs["features_extractor_kwargs"] = {"mean": list(mean), "var": list(var)}
     return PPO(
@@ -371,7 +377,8 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         n_steps=cfg.n_steps,
         batch_size=cfg.batch_size,
         n_epochs=cfg.n_epochs,
-        learning_rate=cfg.learning_rate,
+        learning_rate=lr,
+        target_kl=cfg.target_kl if cfg.target_kl > 0 else None,
         gamma=cfg.gamma,
         gae_lambda=cfg.gae_lambda,
         clip_range=cfg.clip_range,
@@ -393,6 +400,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from training.sb3_vec import make_sb3_vec_env
 
     cfg, run = _resolve(argv)
+    for name, allowed in (("lr_schedule", ("constant", "linear")), ("select_by", ("mean", "min"))):
+        if getattr(cfg, name) not in allowed:
+            raise SystemExit(f"--{name.replace('_', '-')} must be one of {allowed}")
     torch.set_num_threads(cfg.torch_threads)
     (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
@@ -400,11 +410,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     venv = make_sb3_vec_env(
         cfg.n_envs,
         TRAIN_SEED_OFFSET + cfg.seed,
-        cfg.env_kwargs(),
+        cfg.train_env_kwargs(),
         cfg.vec,
         cfg.env_id,
         cfg.action_map(),
         num_threads=cfg.env_threads,
+        max_episode_steps=cfg.train_max_episode_steps(),
     )
     resuming = available(run, "checkpoint")
     start = load_state(find_snapshot(run, "checkpoint"))["num_timesteps"] if resuming else 0

@@ -1,0 +1,198 @@
+"""The tracking task's env options: reward terms, PD-target actions, reference-state starts."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import biped_constraint_env  # noqa: F401
+from biped_constraint_env.env import TRACK_KEYS, ConstrainedBipedEnv
+from biped_constraint_env.reference import load_reference
+from biped_constraint_env.tracking import (
+    PD_FIXED_POSE_RAD,
+    PD_KD,
+    PD_KP,
+    TRACKING_KERNELS,
+    TRACKING_STEP_BONUS,
+    TRACKING_TERMS,
+    TRACKING_WEIGHTS,
+)
+
+TRACK = {"reward": "tracking", "rsi": 0.5, "action": "pd", "pd_around": "reference",
+         "pd_range": 0.5, "phase_obs": True, "reference_obs": True}  # fmt: skip
+KERNEL_TERMS = TRACKING_TERMS[:-1]
+
+
+def _at_reference_row(env, row):
+    """Reset ``env`` at reference row ``row`` with its clock (reference-state start)."""
+    u = env.unwrapped
+    ref = u.tracking.ref
+    u.reset(seed=0, options={"q": ref.q[row], "qd": ref.qd[row], "mode": int(ref.mode[row])})
+    c = u._clock
+    c.first[0], c.mode[0], c.j[0] = bool(ref.first[row]), ref.mode[row], ref.j[row]
+    return ref
+
+
+def test_kernel_terms_are_their_weights_on_the_reference_and_fall_as_documented():
+    env = ConstrainedBipedEnv(reward="tracking")
+    env.reset(seed=0)
+    tr = env.tracking
+    rows = tr.rows()
+    q, qd, hip = rows[:, :6].copy(), rows[:, 6:12].copy(), rows[:, 12:16].copy()
+    on = tr.reward(q, qd, hip, np.array([0]), np.array([True]))[0]
+    for c, name in enumerate(KERNEL_TERMS):
+        assert on[c] == pytest.approx(TRACKING_WEIGHTS[name])
+    assert on[-1] == pytest.approx(1.0)  # the weights sum to one
+    # an error of e in one quantity scales its term by exp(-k e^2), the others unchanged
+    errors = {"pose": (q, 0.3), "velocity": (qd, 2.0)}
+    for name, (arr, e) in errors.items():
+        moved = arr.copy()
+        moved[0, 2] += e
+        args = {"pose": (moved, qd), "velocity": (q, moved)}[name]
+        out = tr.reward(*args, hip, np.array([0]), np.array([True]))[0]
+        c = KERNEL_TERMS.index(name)
+        want = TRACKING_WEIGHTS[name] * np.exp(-TRACKING_KERNELS[name] * e**2)
+        assert out[c] == pytest.approx(want)
+        others = [k for k in range(len(KERNEL_TERMS)) if k != c]
+        np.testing.assert_allclose(out[others], on[others])
+    for col, name, e in ((1, "hip_height", 0.05), (2, "hip_speed", 0.4)):
+        moved = hip.copy()
+        moved[0, col] += e
+        out = tr.reward(q, qd, moved, np.array([0]), np.array([True]))[0]
+        want = TRACKING_WEIGHTS[name] * np.exp(-TRACKING_KERNELS[name] * e**2)
+        assert out[KERNEL_TERMS.index(name)] == pytest.approx(want)
+    # an angle off by a full turn is on the reference (wrapped)
+    turned = q.copy()
+    turned[0, 3] += 2 * np.pi
+    out = tr.reward(turned, qd, hip, np.array([0]), np.array([True]))[0]
+    assert out[0] == pytest.approx(TRACKING_WEIGHTS["pose"])
+    # a period ended by an event earns its steps only
+    dead = tr.reward(q, qd, hip, np.array([1]), np.array([False]))[0]
+    np.testing.assert_array_equal(dead[:-2], 0.0)
+    assert dead[-2] == dead[-1] == TRACKING_STEP_BONUS
+
+
+def test_env_reward_is_the_sum_of_the_tracking_terms_in_info():
+    env = gym.make("ConstrainedBiped-v0", reward="tracking", rsi=1.0, action="pd",
+                   pd_around="reference")  # fmt: skip
+    env.reset(seed=1)
+    seen = 0
+    for _ in range(40):
+        obs, r, term, trunc, info = env.step(np.zeros(5, np.float32))
+        terms = [info[k] for k in TRACK_KEYS]
+        assert r == pytest.approx(sum(terms))
+        assert all(t >= 0 for t in terms)  # positive terms: ending early never pays
+        seen += 1
+        if term:
+            break
+    assert seen >= 1
+
+
+def test_pd_targets_give_the_documented_torques():
+    for around in ("fixed", "reference"):
+        env = ConstrainedBipedEnv(action="pd", pd_around=around, pd_range=0.5)
+        env.reset(seed=3)
+        st = env.state
+        pose = env.tracking.rows()[0, 1:6] if around == "reference" else PD_FIXED_POSE_RAD
+        rate = env.tracking.rows()[0, 7:12] if around == "reference" else 0.0
+        a = np.array([0.2, -0.4, 1.0, 0.0, -1.0], np.float32)
+        _, _, _, _, info = env.step(a)
+        want = PD_KP * (pose + 0.5 * a.astype(np.float64) - st.q[1:]) + PD_KD * (rate - st.qd[1:])
+        np.testing.assert_allclose(info["torque"], np.clip(want, -150, 150))
+    assert env.action_space.high.tolist() == [1.0] * 5
+    env = ConstrainedBipedEnv(action="pd", out_of_range="raise")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="exceeds"):  # beyond [-1, 1]: the env's own policy
+        env.step(np.full(5, 1.5))
+
+
+@pytest.mark.parametrize("kw", [TRACK, {"action": "pd"}, {"action": "pd", "rsi": 0.3}])
+def test_tracking_options_single_equals_batched(kw):
+    n = 5
+    venv = gym.make_vec("ConstrainedBiped-v0", num_envs=n,
+                        vectorization_mode="vector_entry_point", **kw)  # fmt: skip
+    envs = [gym.make("ConstrainedBiped-v0", **kw) for _ in range(n)]
+    ov, _ = venv.reset(seed=7)
+    np.testing.assert_array_equal(ov, [e.reset(seed=7 + i)[0] for i, e in enumerate(envs)])
+    rng = np.random.default_rng(0)
+    done = np.zeros(n, bool)
+    ends = 0
+    for _ in range(200):
+        a = rng.uniform(-0.3, 0.3, (n, 5)).astype(np.float32)
+        ov, rv, tv, _, iv = venv.step(a)
+        for i, e in enumerate(envs):
+            if done[i]:  # NEXT_STEP autoreset: the batch resets this slot, ignoring its action
+                (o, _), r, t = e.reset(), 0.0, False
+            else:
+                o, r, t, _, info = e.step(a[i])
+                np.testing.assert_array_equal(info.get("torque"), iv.get("torque", [None] * n)[i])
+            np.testing.assert_array_equal(o, ov[i])
+            assert r == rv[i]
+            done[i] = t
+        ends += int(tv.sum())
+    assert ends >= 3  # resets were exercised (reference-state starts among them)
+
+
+def test_reference_state_starts_are_recorded_states_with_their_clock():
+    env = ConstrainedBipedEnv(rsi=1.0, phase_obs=True, reference_obs=True)
+    ref = load_reference("midstride")
+    rows = np.concatenate([ref.q, ref.qd], axis=1)
+    for seed in range(20):
+        obs, info = env.reset(seed=seed)
+        st = env.state
+        k = np.flatnonzero(np.all(rows == np.concatenate([st.q, st.qd]), axis=1))
+        assert k.size >= 1, "the start is not a recorded reference state"
+        k = k[0]
+        assert int(st.mode) == ref.mode[k] and info["mode"] == ref.mode[k]
+        c = env._clock
+        assert (c.first[0], c.mode[0], c.j[0]) == (bool(ref.first[k]), ref.mode[k], ref.j[k])
+        np.testing.assert_array_equal(obs[26:], rows[k] if ref.step[k] == ref.gait_step else
+                                      ref.lookup(0, ref.mode[k], ref.j[k])[:12])  # fmt: skip
+
+
+def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
+    plain = ConstrainedBipedEnv()
+    off = ConstrainedBipedEnv(reward="tracking", rsi=0.0)
+    for seed in range(5):
+        np.testing.assert_array_equal(plain.reset(seed=seed)[0], off.reset(seed=seed)[0])
+    half = ConstrainedBipedEnv(rsi=0.5)
+    ref_q = load_reference("midstride").q
+    on_ref = 0
+    for seed in range(200):
+        half.reset(seed=seed)
+        on_ref += bool(np.any(np.all(ref_q == half.state.q, axis=1)))
+    assert 75 <= on_ref <= 125  # binomial(200, 0.5): +-3.5 sigma
+
+
+def test_a_midstride_start_sits_on_the_nearest_reference_state_of_its_model():
+    env = ConstrainedBipedEnv(reference_obs=True, phase_obs=True)
+    obs, _ = env.reset(seed=0)
+    table = env.tracking.ref.tables[(0, 2)]
+    j = int(np.argmin(np.sum((table[:, :6] - env.state.q) ** 2, axis=1)))
+    assert env._clock.j[0] == j and env._clock.mode[0] == 2
+    np.testing.assert_array_equal(obs[26:], table[j, :12])
+    assert obs[25] == pytest.approx(j * env.dt)  # the time in the model follows the clock
+
+
+def test_default_env_is_unchanged_by_the_tracking_options_defaults():
+    a = ConstrainedBipedEnv()
+    b = ConstrainedBipedEnv(reward="env", action="torque", rsi=0.0, reference_obs=False)
+    assert a.tracking is None and a._clock is None
+    oa, _ = a.reset(seed=4)
+    ob, _ = b.reset(seed=4)
+    np.testing.assert_array_equal(oa, ob)
+    tau = np.array([5.0, -3.0, 2.0, 1.0, 0.0])
+    ra = a.step(tau)
+    rb = b.step(tau)
+    np.testing.assert_array_equal(ra[0], rb[0])
+    assert ra[1] == rb[1] and "track_pose" not in ra[4] and "torque" not in ra[4]
+
+
+@pytest.mark.parametrize(
+    "kw, name",
+    [({"reward": "imitate"}, "reward"), ({"rsi": 1.5}, "rsi"), ({"action": "pos"}, "action"),
+     ({"pd_around": "teacher"}, "pd_around"), ({"pd_range": 0.0}, "pd_range"),
+     ({"reference": "backwards"}, "reference"), ({"reference_obs": 1}, "reference_obs")],
+)  # fmt: skip
+def test_bad_tracking_options_are_refused_by_name(kw, name):
+    with pytest.raises(ValueError, match=name):
+        ConstrainedBipedEnv(**kw)
