@@ -1,91 +1,119 @@
 """PPO's training throughput on the batched env, side by side with the env alone, in one run.
 
-    python -m benchmarks.bench_ppo [--steps 200000] [--n-envs 64] [--n-steps 64]
+    python -m benchmarks.bench_ppo [--config training/configs/ppo_from_scratch.toml]
+                                   [--steps 200000] [--rounds 2]
 
-Stable-Baselines3 PPO (MlpPolicy 128 x 128, 5 epochs, minibatch 1024, one torch thread) learns
-on the batched env through :class:`training.sb3_vec.BatchedSB3VecEnv` (the walking task,
-default physics, actions in [-1, 1] scaled by 150 N m) for ``--steps`` env steps; its
-env-steps/s include rollouts and updates. Beside it, the same batched env alone, stepped with
-actions drawn as PPO's initial policy draws them (Gaussian, std 1, clipped). Both are timed
-with the batched env on one numba thread (the default: ``num_threads=1``) and on two, to show
-what the thread policy does next to torch on this machine. Each figure is the best of
-``--rounds`` interleaved rounds.
+Stable-Baselines3 PPO, built exactly as ``python -m training.train_ppo --config CONFIG`` builds
+it (the config's env options, network, rollout, minibatch, epochs; VecMonitor and
+VecNormalize; the batched env behind :class:`training.sb3_vec.BatchedSB3VecEnv`), learns for
+``--steps`` env steps after a warm-up update; its env-steps/s include rollouts and updates.
+Rows:
+
+* PPO with the batched env on one numba thread and torch on one thread throughout (the
+  setting for two training processes on 2 cores);
+* the same with torch on two threads in the updates only (``update_threads = 2``: the env is
+  idle then), the setting for one training process on 2 cores;
+* PPO with the env on two numba threads next to torch on one (the oversubscription the
+  one-thread default avoids);
+* the batched env alone on one thread, stepped with actions drawn as the config's initial
+  policy draws them (Gaussian about 0 with its initial std, clipped).
+
+Each figure is the best of ``--rounds`` interleaved rounds. Early in training most episodes
+are short, so these rows include many resets, as a real run's first minutes do.
 """
 
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
+DEFAULT_CONFIG = "training/configs/ppo_from_scratch.toml"
 
-def ppo_steps_per_s(n_envs: int, n_steps: int, steps: int, env_threads: int) -> float:
+
+def _config(path: str):
+    from training.common import parse_config
+    from training.ppo_config import PPOConfig
+
+    return parse_config(PPOConfig, ["--config", path], "bench")
+
+
+def ppo_steps_per_s(cfg, steps: int, env_threads: int, update_threads: int) -> float:
     """Env steps per second of PPO.learn on the batched env (rollouts and updates)."""
     import torch
-    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from training.sb3_vec import make_sb3_vec_env
+    from training.train_ppo import make_model
+    from training.train_ppo import update_threads as threads_callback
 
     torch.set_num_threads(1)
-    venv = make_sb3_vec_env(n_envs, 0, {}, "batched", num_threads=env_threads)
-    model = PPO(
-        "MlpPolicy",
-        venv,
-        n_steps=n_steps,
-        batch_size=1024,
-        n_epochs=5,
-        policy_kwargs={"net_arch": [128, 128]},
-        seed=0,
-        device="cpu",
-        verbose=0,
-    )
-    model.learn(total_timesteps=n_envs * n_steps)  # warm-up: first compile, first update
-    t0 = time.perf_counter()
-    model.learn(total_timesteps=steps, reset_num_timesteps=False)
-    rate = steps / (time.perf_counter() - t0)
+    venv = make_sb3_vec_env(
+        cfg.n_envs, 0, cfg.train_env_kwargs(), "batched", cfg.env_id, cfg.action_map(),
+        num_threads=env_threads, max_episode_steps=cfg.train_max_episode_steps(),
+    )  # fmt: skip
+    vecnorm = VecNormalize(VecMonitor(venv), norm_obs=True, norm_reward=True, gamma=cfg.gamma)
+    with tempfile.TemporaryDirectory() as tmp:
+        model = make_model(cfg, vecnorm, Path(tmp))
+        callback = threads_callback(1, update_threads)
+        model.learn(total_timesteps=cfg.n_envs * cfg.n_steps, callback=callback)  # warm-up
+        t0 = time.perf_counter()
+        model.learn(total_timesteps=steps, reset_num_timesteps=False, callback=callback)
+        rate = steps / (time.perf_counter() - t0)
+    torch.set_num_threads(1)
     venv.close()
     return rate
 
 
-def env_steps_per_s(n_envs: int, steps: int, env_threads: int) -> float:
-    """Env steps per second of the same batched env alone, with PPO's initial action law."""
+def env_steps_per_s(cfg, steps: int, env_threads: int) -> float:
+    """Env steps per second of the same batched env alone, with the initial policy's law."""
     from training.sb3_vec import make_sb3_vec_env
 
-    venv = make_sb3_vec_env(n_envs, 0, {}, "batched", num_threads=env_threads)
+    venv = make_sb3_vec_env(
+        cfg.n_envs, 0, cfg.train_env_kwargs(), "batched", cfg.env_id, cfg.action_map(),
+        num_threads=env_threads, max_episode_steps=cfg.train_max_episode_steps(),
+    )  # fmt: skip
     venv.reset()
     rng = np.random.default_rng(0)
-    n = max(steps // n_envs, 1)
-    acts = np.clip(rng.standard_normal((n, n_envs, 5)), -1, 1).astype(np.float32)
+    n = max(steps // cfg.n_envs, 1)
+    std = float(np.exp(cfg.log_std_init))
+    acts = np.clip(std * rng.standard_normal((n, cfg.n_envs, 5)), -1, 1).astype(np.float32)
     t0 = time.perf_counter()
     for a in acts:
         venv.step(a)
-    rate = n * n_envs / (time.perf_counter() - t0)
+    rate = n * cfg.n_envs / (time.perf_counter() - t0)
     venv.close()
     return rate
 
 
 def main(argv=None) -> int:
-    """Time PPO and the env alone at 1 and 2 env threads; print the table."""
+    """Time PPO and the env alone; print the table."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default=DEFAULT_CONFIG, help="a train_ppo config (TOML)")
     ap.add_argument("--steps", type=int, default=200_000, help="env steps per PPO timing")
-    ap.add_argument("--n-envs", type=int, default=64)
-    ap.add_argument("--n-steps", type=int, default=64, help="PPO rollout length per env")
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=2)
     a = ap.parse_args(argv)
+    cfg = _config(a.config)
+    rows = {
+        "PPO, env 1 thread, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 1, 1),
+        "PPO, env 1 thread, torch 1 thread (2 in updates)": lambda: ppo_steps_per_s(
+            cfg, a.steps, 1, 2
+        ),
+        "PPO, env 2 threads, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 2, 1),
+        "the batched env alone, 1 thread": lambda: env_steps_per_s(cfg, a.steps, 1),
+    }
     best: dict[str, float] = {}
     for r in range(a.rounds):
-        for threads in (1, 2):
-            for label, fn in (
-                ("PPO (rollouts + updates)", lambda t=threads: ppo_steps_per_s(
-                    a.n_envs, a.n_steps, a.steps, t)),
-                ("the batched env alone", lambda t=threads: env_steps_per_s(
-                    a.n_envs, a.steps, t)),
-            ):  # fmt: skip
-                key = f"{label}, env on {threads} thread{'s' if threads > 1 else ''}"
-                best[key] = max(best.get(key, 0.0), fn())
-        print(f"round {r + 1}/{a.rounds} done", flush=True)
-    print(f"best of {a.rounds} rounds, {a.n_envs} envs, torch on 1 thread:")
+        for key, fn in rows.items():
+            best[key] = max(best.get(key, 0.0), fn())
+            print(f"round {r + 1}/{a.rounds}: {key}: {best[key]:,.0f} env-steps/s", flush=True)
+    print(
+        f"{a.config}: {cfg.n_envs} envs x {cfg.n_steps} steps, minibatch {cfg.batch_size}, "
+        f"{cfg.n_epochs} epochs, net {list(cfg.net_arch)}; best of {a.rounds} rounds:"
+    )
     for key, rate in best.items():
         print(f"{key}: {rate:,.0f} env-steps/s")
     return 0

@@ -54,11 +54,11 @@ forward speed [(m/s)^2]. Each halves the term at an error of about: 0.37 rad (on
 3.7 rad/s, 59 mm, 0.37 m/s."""
 TRACKING_STEP_BONUS = 1.0
 """Reward per completed walking step in the tracking task (a step takes about 170 periods)."""
-PD_KP = np.array([30.0, 30.0, 30.0, 20.0, 6.0])
+PD_KP = np.array([60.0, 150.0, 150.0, 80.0, 30.0])
 """Proportional gains of the PD-target actions, joints 1..5 [N m / rad] (times
-``pd_gain_scale``). Low on purpose: a stance foot on its toe unloads (a strict force event)
-under a few N m of torque noise, so the gains set how much a target's noise costs."""
-PD_KD = np.array([6.0, 6.0, 6.0, 3.0, 1.0])
+``pd_gain_scale``): a target 1 rad away asks for about the torques the model-based teacher
+uses at most (a mid-stride start needs 150 N m at the swing hip at once)."""
+PD_KD = np.array([3.0, 8.0, 8.0, 4.0, 1.0])
 """Derivative gains [N m s / rad] (times the square root of ``pd_gain_scale``; on top of
 the joints' own damping of 10)."""
 PD_GAIN_SCALE_MAX = 100.0

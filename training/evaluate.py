@@ -252,7 +252,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     print(
         f"loaded in {time.time() - t0:.0f} s ({state.get('num_timesteps', 0)} PPO env steps); "
-        f"{args.episodes} episodes of up to 30 s each",
+        f"{args.episodes} episodes of up to 30 s each; in the loop: {cfg.in_the_loop()}",
         flush=True,
     )
     out_dir = args.out or args.run_dir
@@ -278,11 +278,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     figures(actor, cfg, seeds[order[-1]], seeds[order[0]], by_seed, out_dir)
     if args.compare or start == "rest":
         rest_strip(actor, cfg, out_dir / "figures" / "rest_start_network.png", "the network")
-    summary = {"which": args.which, "start": start, "seeds": seeds, "results": rows}
+    summary = {
+        "which": args.which,
+        "start": start,
+        "in_the_loop": cfg.in_the_loop(),
+        "env_kwargs": cfg.env_kwargs(),
+        "seeds": seeds,
+        "results": rows,
+    }
     (out_dir / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
     print(
         f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "
-        f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, {start} start, strict physics:"
+        f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, {start} start, strict physics; "
+        f"in the loop: {cfg.in_the_loop()}:"
     )
     print(
         "| controller | complete steps (mean ± std, min) | distance [m] | speed [m/s] | "

@@ -278,9 +278,12 @@ def build_policy(cfg, observation_space=None):
 
     from biped_constraint_env.observation import observation_space as env_obs_space
 
-    obs_space = observation_space if observation_space is not None else env_obs_space(cfg.phase_obs)
+    if observation_space is None:
+        observation_space = env_obs_space(cfg.phase_obs, cfg.reference_obs)
     act_space = spaces.Box(-1.0, 1.0, (5,), np.float32)
-    return ActorCriticPolicy(obs_space, act_space, lambda _: 0.0, **cfg.policy_kwargs())
+    return ActorCriticPolicy(
+        observation_space, act_space, lambda _: 0.0, use_sde=cfg.use_sde, **cfg.policy_kwargs()
+    )
 
 
 def read_config(run: Path):

@@ -52,8 +52,13 @@ class PPOConfig:
     log_std_init: float = -3.0  # initial log std of the actions: std 0.05 (7.5 N m); the flat
     # stance foot tolerates only about +-11 N m of ankle moment before an end unloads; SB3's 0
     # (150 N m) breaks contact at once
+    use_sde: bool = False  # generalized state-dependent exploration (gSDE) instead of
+    # independent Gaussian noise per period
+    sde_sample_freq: int = -1  # with use_sde: periods between new noise matrices (-1: rollout)
     net_arch: tuple[int, ...] = (256, 256)  # hidden layers of the actor and the critic
     torch_threads: int = 1  # torch threads (1: the env and torch do not fight for 2 cores)
+    update_threads: int = 0  # torch threads in PPO's updates, when the env is idle
+    # (0: torch_threads; 2 on an otherwise idle 2-core machine, 1 with two runs side by side)
     eval_freq: int = 100_000  # env steps between evaluations (they select best/)
     eval_episodes: int = 10  # episodes per evaluation, on the selection seeds
     select_by: str = "mean"  # best/ is the evaluation with the most steps: "mean" or "min"
@@ -151,6 +156,20 @@ class PPOConfig:
 
         gear = self.gear[0] if len(self.gear) == 1 else self.gear
         return action_map_from(self.base_controller, gear)
+
+    def in_the_loop(self) -> str:
+        """What acts at run time: the network alone, or with a PD law or a controller."""
+        if self.base_controller:
+            return f"network residual on the controller {self.base_controller!r}"
+        if self.action == "pd" and self.pd_around == "reference":
+            what = "network + PD about the reference pose at the contact clock"
+        elif self.action == "pd":
+            what = "network alone (PD targets about a fixed pose)"
+        else:
+            what = "network alone (torques)"
+        if self.reference_obs:
+            what += ", the reference state in its input"
+        return what
 
     def obs_dim(self) -> int:
         """The observation's length (24; + 2 phase entries; + 12 reference entries)."""

@@ -228,6 +228,28 @@ def _critic_warmup(cfg: PPOConfig, anchor=None):
     return CriticWarmup()
 
 
+def update_threads(rollout_threads: int, update_threads: int):
+    """A callback: torch on ``update_threads`` threads in PPO's updates, else ``rollout_threads``.
+
+    In an update the env is idle, so torch may use the cores the env used in the rollouts
+    without the two fighting (the batched env's numba threads are idle, not spinning).
+    """
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class UpdateThreads(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_start(self) -> None:  # after the previous update
+            torch.set_num_threads(rollout_threads)
+
+        def _on_rollout_end(self) -> None:  # the update follows
+            torch.set_num_threads(update_threads)
+
+    return UpdateThreads()
+
+
 def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -379,6 +401,8 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         n_epochs=cfg.n_epochs,
         learning_rate=lr,
         target_kl=cfg.target_kl if cfg.target_kl > 0 else None,
+        use_sde=cfg.use_sde,
+        sde_sample_freq=cfg.sde_sample_freq,
         gamma=cfg.gamma,
         gae_lambda=cfg.gae_lambda,
         clip_range=cfg.clip_range,
@@ -487,7 +511,11 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
         print(f"PPO: {remaining} env steps to go", flush=True)
         model.learn(
             total_timesteps=remaining,
-            callback=[callback, _critic_warmup(cfg, anchor)],
+            callback=[
+                callback,
+                _critic_warmup(cfg, anchor),
+                update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
+            ],
             progress_bar=cfg.progress,
             reset_num_timesteps=start == 0,
         )

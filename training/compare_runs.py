@@ -1,0 +1,102 @@
+"""Evaluate several training runs on the same held-out seeds and print one table.
+
+    python -m training.compare_runs RUN [RUN ...] [--which best final] [--episodes 10]
+                                    [--out runs/compare.json]
+
+For the training seeds and ablations of a study: each run's ``best`` (selected on the
+selection seeds during training) and/or ``final`` snapshot is evaluated, as ``python -m
+training.evaluate`` would (the run's own env options, the env's start distribution, default
+strict physics), on evaluation seeds 0, 1, ... that no training or selection used. A row
+gives the run, what its config changes against the first run's, what is in the loop at run
+time, and the complete steps (mean ± std, min) with the episodes' ends.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from training.policy_io import available, find_snapshot, load_policy, load_state, policy_actor
+from training.rollouts import run_episodes, summarize
+
+IGNORED = {"seed", "out_dir", "resume", "progress", "total_timesteps"}
+"""Config fields that do not make a run a different recipe."""
+
+
+def differences(cfg, base) -> str:
+    """The config fields where ``cfg`` differs from ``base`` (``name=value``, comma-separated)."""
+    a, b = asdict(cfg), asdict(base)
+    diff = [f"{k}={a[k]!r}" for k in a if k not in IGNORED and a[k] != b[k]]
+    return ", ".join(diff) or "-"
+
+
+def evaluate_run(run: Path, which: str, seeds: list[int]) -> dict:
+    """One run's snapshot on ``seeds``: the summary of :func:`training.rollouts.summarize`."""
+    policy, norm, cfg, state = load_policy(run, which)
+    start = "midstride" if cfg.start == "mixed" else cfg.start
+    cfg = replace(cfg, start=start)
+    eps = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), seeds, cfg.env_id)
+    row = summarize(f"{run.name} ({which})", eps)
+    row.update(num_timesteps=int(state.get("num_timesteps", 0)), start=start)
+    return row
+
+
+def main(argv=None) -> int:
+    """Evaluate every run's snapshots; print the markdown table; write the JSON."""
+    from training.policy_io import read_config
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="+", type=Path)
+    ap.add_argument("--which", nargs="+", default=["best", "final"])
+    ap.add_argument("--episodes", type=int, default=10)
+    ap.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
+    ap.add_argument("--out", type=Path, default=None, help="write the rows as JSON here")
+    a = ap.parse_args(argv)
+    seeds = list(range(a.seed, a.seed + a.episodes))
+    base = read_config(a.runs[0])
+    rows = []
+    t0 = time.time()
+    for run in a.runs:
+        cfg = read_config(run)
+        for which in a.which:
+            if not available(run, which):
+                print(f"{run}: no {which} snapshot", flush=True)
+                continue
+            row = evaluate_run(run, which, seeds)
+            steps = np.array([e["steps_completed"] for e in row["episodes"]])
+            row.update(
+                run=str(run),
+                which=which,
+                training_seed=cfg.seed,
+                changes=differences(cfg, base),
+                in_the_loop=cfg.in_the_loop(),
+                selected_at=load_state(find_snapshot(run, which)).get("num_timesteps"),
+            )
+            rows.append(row)
+            print(
+                f"{run.name} {which}: {steps.mean():.1f} ± {steps.std():.1f}, min {steps.min()} "
+                f"({row['ends']}; {time.time() - t0:.0f} s)",
+                flush=True,
+            )
+    print(f"\nseeds {seeds[0]}-{seeds[-1]}, 30 s episodes, default strict physics:")
+    print("| run | seed | snapshot (env steps) | changes | in the loop | complete steps | ends |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(
+            f"| {Path(r['run']).name} | {r['training_seed']} | {r['which']} ({r['selected_at']}) "
+            f"| {r['changes']} | {r['in_the_loop']} | {r['steps_mean']:.1f} ± "
+            f"{r['steps_std']:.1f}, min {r['steps_min']} | {r['ends']} |"
+        )
+    if a.out is not None:
+        a.out.parent.mkdir(parents=True, exist_ok=True)
+        a.out.write_text(json.dumps({"seeds": seeds, "rows": rows}, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
