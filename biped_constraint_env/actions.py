@@ -16,8 +16,17 @@ TORQUE_LIMIT_MIN_NM, TORQUE_LIMIT_MAX_NM = 1e-3, 1e6
 """Accepted range of ``torque_limit_nm`` [N m] (the control cost divides by its square)."""
 
 
-def validate_actions(actions: Any, limit: float, out_of_range: str) -> np.ndarray:
-    """(..., 5) float64 torques [N m]; ValueError on NaN/inf/shape/dtype/range (as documented)."""
+PD_BOUND = "PD-target bound"
+"""``bound`` of :func:`validate_actions` for PD-target actions (limit 1, no unit)."""
+
+
+def validate_actions(
+    actions: Any, limit: float, out_of_range: str, bound: str = "torque limit"
+) -> np.ndarray:
+    """(..., 5) float64 torques [N m]; ValueError on NaN/inf/shape/dtype/range (as documented).
+
+    ``bound`` names the limit in the messages (:data:`PD_BOUND` for PD-target actions).
+    """
     a = actions if isinstance(actions, np.ndarray) else np.asarray(actions)
     if a.shape[-1:] != (N_ACTUATED,):
         raise ValueError(f"action must have shape ({N_ACTUATED},), got {a.shape}")
@@ -32,12 +41,15 @@ def validate_actions(actions: Any, limit: float, out_of_range: str) -> np.ndarra
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action must be finite, got {a}")
         if out_of_range == "raise":
-            raise ValueError(f"action {a} exceeds the torque limit +-{limit} N m")
+            unit = " N m" if bound == "torque limit" else ""
+            raise ValueError(f"action {a} exceeds the {bound} +-{limit}{unit}")
         a = np.clip(a, -limit, limit)
     return a
 
 
-def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
+def validate_action(
+    action: Any, limit: float, out_of_range: str, bound: str = "torque limit"
+) -> np.ndarray:
     """(5,) float64 torques [N m] from one action (see :func:`validate_actions`)."""
     a = action if isinstance(action, np.ndarray) else np.asarray(action)
     if a.shape != (N_ACTUATED,):
@@ -46,7 +58,7 @@ def validate_action(action: Any, limit: float, out_of_range: str) -> np.ndarray:
         a64 = a.astype(np.float64)
         if all(-limit <= x <= limit for x in a64.tolist()):  # False for NaN: screens it too
             return a64
-    return validate_actions(a, limit, out_of_range)
+    return validate_actions(a, limit, out_of_range, bound)
 
 
 def check_action_settings(torque_limit_nm: float, out_of_range: str) -> tuple[float, str]:

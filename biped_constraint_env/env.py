@@ -14,7 +14,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .actions import TORQUE_LIMIT_NM, action_config, check_action_settings, validate_action
+from .actions import (
+    PD_BOUND,
+    TORQUE_LIMIT_NM,
+    action_config,
+    check_action_settings,
+    validate_action,
+)
 from .clock import ContactClock
 from .model import N_ACTUATED, BipedParams, paper_biped
 from .modes import EventCode
@@ -350,7 +356,7 @@ class ConstrainedBipedEnv(gym.Env):
                 )
             validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises if invalid
         if self.pd_action:  # PD targets in [-1, 1] -> torques [N m]
-            a = validate_action(a, 1.0, self.out_of_range)
+            a = validate_action(a, 1.0, self.out_of_range, PD_BOUND)
             a = self.tracking.torques(a[None, :], sim.q[:1], sim.qd[:1])[0]
         steps0 = sim.ist[0, 2]
         buf.act[0] = a  # as float64; checked (and clipped) in the compiled period

@@ -18,7 +18,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .actions import action_config, validate_actions
+from .actions import PD_BOUND, action_config, validate_actions
 from .env import (
     TRACK_KEYS,
     ConstrainedBipedEnv,
@@ -175,7 +175,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         p = self._proto
         buf = self._buf
         if self._pd:
-            targets = validate_actions(actions, 1.0, p.out_of_range)
+            targets = validate_actions(actions, 1.0, p.out_of_range, PD_BOUND)
         else:
             tau = validate_actions(actions, p.torque_limit_nm, p.out_of_range)
         resetting = np.flatnonzero(self._autoreset)

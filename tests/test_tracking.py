@@ -101,7 +101,7 @@ def test_pd_targets_give_the_documented_torques():
     assert env.action_space.high.tolist() == [1.0] * 5
     env = ConstrainedBipedEnv(action="pd", out_of_range="raise")
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="exceeds"):  # beyond [-1, 1]: the env's own policy
+    with pytest.raises(ValueError, match="exceeds the PD-target bound"):  # the env's policy
         env.step(np.full(5, 1.5))
 
 

@@ -86,6 +86,8 @@ class PPOConfig:
     bc_grad_steps: int = 20_000  # gradient steps of the first and last fit (a third between)
     bc_lr: float = 1e-3  # learning rate of the behaviour cloning
     bc_ankle_weight: float = 1.0  # weight of the stance ankle's error (the swing ankle: half)
+    log_std_joints: tuple[float, ...] = ()  # 5 values: initial log std per joint (overrides
+    # log_std_init; the stance ankle tolerates far less noise than the hip)
     action_std_nm: float = 0.0  # > 0: initial action std [N m] on every joint (overrides
     # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
     critic_warmup: int = 0  # rollouts at the start of PPO in which only the critic learns

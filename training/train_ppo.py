@@ -488,6 +488,10 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
     else:
         model = make_model(cfg, vecnorm, run)
     if model.num_timesteps == 0:
+        if len(cfg.log_std_joints) == 5:
+            model.policy.log_std.data[:] = torch.as_tensor(cfg.log_std_joints)
+        elif cfg.log_std_joints:
+            raise SystemExit("--log-std-joints needs 5 values (one per joint) or none")
         if cfg.action_std_nm > 0:
             gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
             model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
