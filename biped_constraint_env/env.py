@@ -383,6 +383,8 @@ class ConstrainedBipedEnv(gym.Env):
         if self._clock is None:
             return buf.obs[0].copy(), reward, reason is not None, False, info
         self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
+        if self.tracking is not None and self.tracking.ref is not None:
+            self.tracking.after_period(sim.ist[:1, 2])
         if self._track_reward:
             track = self.tracking.reward(
                 sim.q[:1], sim.qd[:1], self._hip[:1], sim.ist[:1, 2] - steps0,
@@ -472,9 +474,10 @@ def start_clocks(clock, tracking, idx: np.ndarray, sim) -> None:
     """Start the clocks of slots ``idx`` at their current states (placed on the reference)."""
     if clock is None:
         return
-    clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
     if tracking is not None and tracking.ref is not None:
-        tracking.place(idx, sim)
+        tracking.start_given(idx, sim)
+    else:
+        clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
 
 
 def observations(obs: np.ndarray, clock, tracking, env) -> np.ndarray:

@@ -4,8 +4,9 @@ A reference is a recorded walk (``python -m training.record_reference``: the mod
 teacher, under the default physics and strict checks), kept as plain arrays in an npz file.
 It is looked up on the *contact clock* ``(first, mode, j)``:
 
-* ``first``: whether the first step from rest is still under way (a start at rest walks its
-  own first step, then the gait);
+* ``first``: whether the recording's first step from its own start is still under way (a
+  start walks its own first step, then the gait): from rest in the rest reference, from the
+  mid-stride start in the mid-stride one (:attr:`Reference.start`);
 * ``mode``: the paper's model (1-4) the state is in;
 * ``j``: control periods since that model was entered.
 
@@ -41,8 +42,9 @@ class Reference:
     """A recorded walk and its phase tables (see the module docstring).
 
     ``table[(first, mode)]`` is the (n_j, 16) array of (q, qd, hip) of that contact phase,
-    one row per period since the phase began: the first step's phases from its own recording
-    (``first`` = 1, references started at rest), the gait's from the step ``gait_step``.
+    one row per period since the phase began: the first step's phases (``first`` = 1) from
+    the recording's first step (``step`` 0, from its own start), the gait's from the step
+    ``gait_step``.
     """
 
     q: np.ndarray
@@ -55,6 +57,11 @@ class Reference:
     dt: float
     gait_step: int
 
+    @property
+    def start(self) -> str:
+        """The start the recording walks from: "rest" (it begins at rest) or "midstride"."""
+        return "rest" if self.first.any() else "midstride"
+
     @functools.cached_property
     def tables(self) -> dict[tuple[int, int], np.ndarray]:
         """(first, mode) -> (n_j, 16) rows of (q, qd, hip) by periods since the phase began."""
@@ -62,9 +69,7 @@ class Reference:
         out = {}
         for first in (0, 1):
             for mode in (1, 2, 3, 4):
-                sel = (self.mode == mode) & (self.first == first)
-                if first == 0:
-                    sel &= self.step == self.gait_step
+                sel = (self.mode == mode) & (self.step == (0 if first else self.gait_step))
                 if sel.any():
                     out[(first, mode)] = rows[sel][np.argsort(self.j[sel], kind="stable")]
         return out

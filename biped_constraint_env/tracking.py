@@ -27,8 +27,10 @@ phase. The default env uses none of it.
   the fixed pose and the reference's q-dot about the reference), clipped to the torque
   limit, are held over the period.
 
-Clock placement: with a reference, a start that is not at rest (mid-stride) is placed on the
-clock at the reference state of its model nearest in q, rather than at the model's beginning.
+Clock: the reference's first step (its recording's first step from its own start) serves the
+starts of the same kind, until their first step completes: a start at rest with the rest
+reference, a mid-stride start with the mid-stride reference. Any other start is placed on the
+gait's phase of its model at the state nearest in q; reference-state starts take their row's.
 """
 
 from __future__ import annotations
@@ -134,6 +136,7 @@ class Tracking:
         self.kp = PD_KP * settings["pd_gain_scale"]
         self.kd = PD_KD * np.sqrt(settings["pd_gain_scale"])
         self.ref: Reference | None = None
+        self.first = np.zeros(n, bool)  # in the reference's first step from its own start
         if settings["needs_reference"]:
             self.ref = load_reference(settings["reference"])
             tables = self.ref.tables
@@ -152,7 +155,7 @@ class Tracking:
     def rows(self) -> np.ndarray:
         """(n, 16): the reference's (q, q-dot, hip) at every environment's clock."""
         c = self.clock
-        f = c.first.astype(np.int64)
+        f = self.first.astype(np.int64)
         m = c.mode
         return self._rows[self._offset[f, m] + np.minimum(c.j, self._len[f, m] - 1)]
 
@@ -182,17 +185,34 @@ class Tracking:
             sim.q[slots], sim.qd[slots] = ref.q[r], ref.qd[r]
             start_slots(params, options, sim, slots, ref.mode[r].astype(np.int64))
         self.clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
+        # the reference's first step serves the starts of its own kind
+        self.first[idx] = self.clock.first[idx] == (self.ref.start == "rest")
         if on_ref.any():
             self.clock.first[slots] = ref.first[r].astype(bool)
             self.clock.j[slots] = ref.j[r]
-        if self.ref is not None:
-            self.place(idx[own], sim)
+            self.first[slots] = ref.step[r] == 0
+        self.place(idx[own], sim)
+
+    def start_given(self, idx: np.ndarray, sim) -> None:
+        """Clocks of slots ``idx`` started at given states (``reset(options=...)``).
+
+        A start at rest takes the rest reference's first step; any other is placed on the
+        gait (:meth:`place`).
+        """
+        idx = np.asarray(idx, np.int64)
+        self.clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
+        self.first[idx] = self.clock.first[idx] & (self.ref.start == "rest")
+        self.place(idx, sim)
+
+    def after_period(self, steps_after: np.ndarray) -> None:
+        """End the reference's first step where a step has completed."""
+        self.first &= steps_after == 0
 
     def place(self, idx: np.ndarray, sim) -> None:
-        """Clock of starts not at rest: the nearest (in q) reference state of their model."""
+        """Clocks of starts off the reference's first step: the gait's nearest state (in q)."""
         c = self.clock
         idx = np.asarray(idx, np.int64)
-        idx = idx[~c.first[idx]]
+        idx = idx[~self.first[idx]]
         for m in np.unique(c.mode[idx]):
             slots = idx[c.mode[idx] == m]
             o, n = self._offset[0, m], self._len[0, m]

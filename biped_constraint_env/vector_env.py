@@ -194,6 +194,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             stepped = np.ones(self.num_envs, bool)
             stepped[resetting] = False
             self._clock.advance(buf.sim.ist[:, 0], buf.sim.ist[:, 2], stepped)
+            if self.tracking is not None and self.tracking.ref is not None:
+                self.tracking.after_period(buf.sim.ist[:, 2])
         status = buf.sim.status
         fell = buf.fell.astype(bool)
         terminated = (status > 0) | fell

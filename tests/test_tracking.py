@@ -145,8 +145,11 @@ def test_reference_state_starts_are_recorded_states_with_their_clock():
         assert int(st.mode) == ref.mode[k] and info["mode"] == ref.mode[k]
         c = env._clock
         assert (c.first[0], c.mode[0], c.j[0]) == (bool(ref.first[k]), ref.mode[k], ref.j[k])
-        np.testing.assert_array_equal(obs[26:], rows[k] if ref.step[k] == ref.gait_step else
-                                      ref.lookup(0, ref.mode[k], ref.j[k])[:12])  # fmt: skip
+        first = ref.step[k] == 0  # the recording's first step, else the gait's phase
+        assert env.tracking.first[0] == first
+        np.testing.assert_array_equal(obs[26:], ref.lookup(first, ref.mode[k], ref.j[k])[:12])
+        if first or ref.step[k] == ref.gait_step:
+            np.testing.assert_array_equal(obs[26:], rows[k])
 
 
 def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
@@ -163,14 +166,31 @@ def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
     assert 75 <= on_ref <= 125  # binomial(200, 0.5): +-3.5 sigma
 
 
-def test_a_midstride_start_sits_on_the_nearest_reference_state_of_its_model():
+def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_state():
+    # a mid-stride start with the mid-stride reference: the teacher's walk from such a start
     env = ConstrainedBipedEnv(reference_obs=True, phase_obs=True)
     obs, _ = env.reset(seed=0)
+    assert env.tracking.first[0] and env._clock.j[0] == 0 and env._clock.mode[0] == 2
+    np.testing.assert_array_equal(obs[26:], env.tracking.ref.tables[(1, 2)][0, :12])
+    for _ in range(400):  # the first step completes: the gait's phases from then on
+        obs, _, term, _, info = env.step(np.zeros(5))
+        if info["steps_completed"] or term:
+            break
+    assert not env.tracking.first[0] or term
+    # a mid-stride start with the rest reference: the gait's nearest state of model 2
+    env = ConstrainedBipedEnv(start="mixed", reference_obs=True, phase_obs=True)
+    for seed in range(10):
+        obs, info = env.reset(seed=seed)
+        if info["mode"] == 2:
+            break
     table = env.tracking.ref.tables[(0, 2)]
     j = int(np.argmin(np.sum((table[:, :6] - env.state.q) ** 2, axis=1)))
-    assert env._clock.j[0] == j and env._clock.mode[0] == 2
+    assert not env.tracking.first[0] and env._clock.j[0] == j
     np.testing.assert_array_equal(obs[26:], table[j, :12])
     assert obs[25] == pytest.approx(j * env.dt)  # the time in the model follows the clock
+    # a start at rest with the rest reference: its first step
+    env.reset(seed=0, options={"q": np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])})
+    assert env.tracking.first[0] and env._clock.j[0] == 0
 
 
 def test_default_env_is_unchanged_by_the_tracking_options_defaults():
