@@ -171,6 +171,40 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
     assert (run / "figures" / "best.gif").is_file()
 
 
+def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, monkeypatch):
+    """The from-scratch recipe's pipeline: PD targets, tracking reward, reference starts in
+    training only; evaluate and compare_runs rebuild the run-time env from the config."""
+    from training import compare_runs, train_ppo
+    from training.policy_io import read_config
+
+    small = ["--total-timesteps", "512", "--n-envs", "4", "--n-steps", "64", "--batch-size",
+             "128", "--n-epochs", "1", "--eval-freq", "256", "--eval-episodes", "1",
+             "--checkpoint-freq", "256", "--progress", "false"]  # fmt: skip
+    small += ["--out-dir", str(tmp_path)]
+    config = "training/configs/ppo_from_scratch.toml"
+    assert train_ppo.main(["--config", config, *small]) == 0
+    assert train_ppo.main(["--config", config, *small, "--seed", "1", "--rsi", "0"]) == 0
+    run0, run1 = sorted((tmp_path / "train_ppo").iterdir())
+    cfg = read_config(run0)
+    assert cfg.action == "pd" and cfg.reward == "tracking" and cfg.rsi > 0
+    assert "rsi" not in cfg.env_kwargs() and cfg.train_env_kwargs()["rsi"] == cfg.rsi
+    seen = []
+    real = compare_runs.run_episodes
+
+    def spy(actor, env_kwargs, seeds, env_id):
+        seen.append(env_kwargs)
+        return real(actor, env_kwargs, seeds, env_id)
+
+    monkeypatch.setattr(compare_runs, "run_episodes", spy)
+    out = tmp_path / "compare.json"
+    argv = [str(run0), str(run1), "--which", "final", "--episodes", "2", "--out", str(out)]
+    assert compare_runs.main(argv) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert [r["training_seed"] for r in rows] == [0, 1]
+    assert rows[1]["changes"] == "rsi=0.0" and "PD" in rows[0]["in_the_loop"]
+    assert all(kw["action"] == "pd" and "rsi" not in kw for kw in seen)
+
+
 def test_train_ppo_help_explains_every_setting(capsys):
     from training import train_ppo
     from training.common import field_help
