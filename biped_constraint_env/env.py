@@ -234,6 +234,7 @@ class ConstrainedBipedEnv(gym.Env):
         pd_range: float = PD_RANGE_RAD,
         reference_obs: bool = False,
         pd_gain_scale: float = 1.0,
+        pd_pose=None,
         render_mode: str | None = None,
         **unknown: Any,
     ):
@@ -279,7 +280,7 @@ class ConstrainedBipedEnv(gym.Env):
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
         self.tracking_settings = check_tracking_settings(
             self.start, reward, reference, rsi, action, pd_around, pd_range, reference_obs,
-            pd_gain_scale,
+            pd_gain_scale, pd_pose,
         )  # fmt: skip
         ts = self.tracking_settings
         self.pd_action = ts["action"] == "pd"

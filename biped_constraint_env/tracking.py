@@ -20,8 +20,9 @@ phase. The default env uses none of it.
   its target at run time. Without it a policy sees the phase only (``phase_obs``: the
   first-step flag and the time in the model, which with the model one-hot is the clock).
 * ``action="pd"``: the action in [-1, 1]^5 sets joint targets ``pose + pd_range * a``
-  [rad] for q1..q5, where ``pose`` is the fixed :data:`PD_FIXED_POSE_RAD`
-  (``pd_around="fixed"``, the default: no reference at run time) or the reference's q at the
+  [rad] for q1..q5, where ``pose`` is a fixed pose, ``pd_pose`` (default
+  :data:`PD_FIXED_POSE_RAD`; ``pd_around="fixed"``, the default: no reference at run time),
+  or the reference's q at the
   clock (``pd_around="reference"``); the torques ``Kp (target - q) + Kd (rate - q-dot)``
   (:data:`PD_KP` x ``pd_gain_scale``, :data:`PD_KD` x its square root; ``rate`` is 0 about
   the fixed pose and the reference's q-dot about the reference), clipped to the torque
@@ -43,7 +44,7 @@ from .clock import ContactClock
 from .model import N_ACTUATED, N_LINKS
 from .reference import REFERENCES, Reference, load_reference
 from .starts import draw_starts, start_slots
-from .validation import check_bool, check_choice, check_real
+from .validation import check_array, check_bool, check_choice, check_real
 
 TRACKING_TERMS = ("pose", "velocity", "hip_height", "hip_speed", "step")
 """The tracking reward's terms, in ``info`` as ``track_<term>`` (their sum is the reward)."""
@@ -68,7 +69,7 @@ PD_RANGE_RAD = 1.0
 """Default half-range of the PD targets around the pose [rad] (``pd_range``)."""
 PD_RANGE_MAX_RAD = 3.0
 PD_FIXED_POSE_RAD = np.array([-0.1, 0.1, -0.3, -0.4, 0.7])
-"""The pose of ``pd_around="fixed"``: q1..q5 of the Fig. 2 rest posture [rad]."""
+"""The default ``pd_pose`` of ``pd_around="fixed"``: q1..q5 of the Fig. 2 rest posture [rad]."""
 ACTIONS = ("torque", "pd")
 PD_AROUND = ("fixed", "reference")
 REWARDS = ("env", "tracking")
@@ -84,6 +85,7 @@ def check_tracking_settings(
     pd_range,
     reference_obs,
     pd_gain_scale=1.0,
+    pd_pose=None,
 ) -> dict:
     """The validated tracking options of an env (see the module docstring).
 
@@ -102,6 +104,9 @@ def check_tracking_settings(
         "pd_gain_scale": check_real(
             "pd_gain_scale", pd_gain_scale, 0.0, PD_GAIN_SCALE_MAX, low_open=True
         ),
+        "pd_pose": PD_FIXED_POSE_RAD.copy()
+        if pd_pose is None
+        else check_array("pd_pose", pd_pose, (N_ACTUATED,), np.pi, " [rad]"),
     }
     if reference is None:
         reference = "rest" if start in ("rest", "mixed") else "midstride"
@@ -227,7 +232,7 @@ class Tracking:
             rows = self.rows()
             pose, rate = rows[:, 1:N_LINKS], rows[:, N_LINKS + 1 : 2 * N_LINKS]
         else:
-            pose, rate = PD_FIXED_POSE_RAD, 0.0
+            pose, rate = self.settings["pd_pose"], 0.0
         target = pose + self.settings["pd_range"] * np.clip(actions, -1.0, 1.0)
         tau = self.kp * (target - q[:, 1:]) + self.kd * (rate - qd[:, 1:])
         return np.clip(tau, -self.limit, self.limit)

@@ -31,6 +31,7 @@ class PPOConfig:
     pd_around: str = "fixed"  # PD targets about the "fixed" rest pose or the "reference" pose
     pd_range: float = 1.0  # half-range of the PD targets [rad]
     pd_gain_scale: float = 1.0  # the PD gains' scale (Kp x it, Kd x its square root)
+    pd_pose: tuple[float, ...] = ()  # q1..q5 of the fixed PD pose [rad] (() = the env's)
     reference_obs: bool = False  # observe the reference's q and q-dot at the clock
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
