@@ -175,7 +175,26 @@ class ConstrainedBipedEnv(gym.Env):
     | fall_hip_height_m | None | | end the episode when the hip is below [m] |
     | posture | NOMINAL_POSTURE_RAD | | start posture of ``start="rest"`` [rad] |
     | phase_obs | False | | append the contact clock's phase (below) to the observation |
+    | reward | "env" | | "env" (Rewards) or "tracking" (a reference walk's; below) |
+    | reference | None | | the reference walk: "midstride", "rest" or an npz path |
+    | | | | (None: "rest" for the rest and mixed starts, else "midstride") |
+    | rsi | 0.0 | | fraction of resets at reference states (reference-state starts) |
+    | action | "torque" | | "torque" or "pd": PD targets in [-1, 1]^5 (below) |
+    | pd_around, pd_range | "fixed", 1.0 | | targets about ``pd_pose`` or the reference [rad] |
+    | pd_pose, pd_gain_scale | Fig. 2, 1.0 | | the fixed pose q1..q5 [rad]; Kp x s, Kd x sqrt(s) |
+    | reference_obs | False | | append the reference's q and q-dot at the clock (12) |
     | render_mode | None | | "rgb_array" or "human" |
+
+    ## Tracking task
+    Options for learning from a reference walk (:mod:`.tracking`; the default env uses none):
+    ``reward="tracking"`` is a DeepMimic-style sum of exponential kernels of the pose, rate, hip
+    height and hip speed errors against the reference at the contact clock, plus 1 per
+    completed step (``info["track_<term>"]``); ``rsi`` starts that fraction of the episodes at
+    recorded reference states; ``action="pd"`` makes the action five joint targets, tracked by
+    the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains ``PD_KP``, ``PD_KD``
+    (``info["torque"]`` gives the torques); ``reference_obs`` shows the reference to the
+    policy. The clock restarts at every model switch; a start follows its own reference's
+    first step (rest with "rest", mid-stride with "midstride").
 
     ## Version History
     * v0 (unreleased, the only id): accurate physics and the walking task by default; the
@@ -187,6 +206,9 @@ class ConstrainedBipedEnv(gym.Env):
       argument is checked by name (no silent coercion), ``step()`` before ``reset()`` or after
       an episode's end raises, a start drawn below the ground is drawn again. Added:
       ``start="mixed"``, ``phase_obs``; the batched env's ``num_threads`` (default 1).
+      Added: the tracking task's options (``reward``, ``reference``, ``rsi``, ``action``,
+      ``pd_around``, ``pd_range``, ``pd_pose``, ``pd_gain_scale``, ``reference_obs``); the
+      defaults leave the env as it was.
 
     Example:
         >>> import gymnasium as gym
