@@ -1,14 +1,16 @@
 """Evaluate several training runs on the same held-out seeds and print one table.
 
     python -m training.compare_runs RUN [RUN ...] [--which best final] [--episodes 10]
-                                    [--out runs/compare.json]
+                                    [--scaffold CONFIG.toml] [--out runs/compare.json]
 
 For the training seeds and ablations of a study: each run's ``best`` (selected on the
 selection seeds during training) and/or ``final`` snapshot is evaluated, as ``python -m
 training.evaluate`` would (the run's own env options, the env's start distribution, default
 strict physics), on evaluation seeds 0, 1, ... that no training or selection used. A row
 gives the run, what its config changes against the first run's, what is in the loop at run
-time, and the complete steps (mean ± std, min) with the episodes' ends.
+time, and the complete steps (mean ± std, min) with the episodes' ends. ``--scaffold`` adds
+the row of a config's run-time env with a zero network output (all that the PD law, the
+reference and the env do without a network).
 """
 
 from __future__ import annotations
@@ -46,20 +48,45 @@ def evaluate_run(run: Path, which: str, seeds: list[int]) -> dict:
     return row
 
 
+def scaffold_row(config: Path, seeds: list[int]) -> dict:
+    """The run-time env of ``config`` with a zero network output, on ``seeds``."""
+    from training.common import parse_config
+    from training.ppo_config import PPOConfig
+
+    cfg = parse_config(PPOConfig, ["--config", str(config)], "")
+    amap = cfg.action_map()
+
+    def zero(obs):
+        return amap(np.zeros((1, 5)), obs[None, :])[0]
+
+    eps = run_episodes(zero, cfg.env_kwargs(), seeds, cfg.env_id)
+    row = summarize(f"zero network output ({config.name})", eps)
+    row.update(
+        run=str(config),
+        which="-",
+        training_seed="-",
+        changes="network output 0",
+        in_the_loop=cfg.in_the_loop().replace("network", "zero output", 1),
+        selected_at="-",
+    )
+    return row
+
+
 def main(argv=None) -> int:
     """Evaluate every run's snapshots; print the markdown table; write the JSON."""
     from training.policy_io import read_config
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("runs", nargs="+", type=Path)
+    ap.add_argument("runs", nargs="*", type=Path)
+    ap.add_argument("--scaffold", type=Path, default=None, help="a config: zero-output row")
     ap.add_argument("--which", nargs="+", default=["best", "final"])
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
     ap.add_argument("--out", type=Path, default=None, help="write the rows as JSON here")
     a = ap.parse_args(argv)
     seeds = list(range(a.seed, a.seed + a.episodes))
-    base = read_config(a.runs[0])
-    rows = []
+    rows = [scaffold_row(a.scaffold, seeds)] if a.scaffold is not None else []
+    base = read_config(a.runs[0]) if a.runs else None
     t0 = time.time()
     for run in a.runs:
         cfg = read_config(run)
