@@ -6,7 +6,9 @@
 Stable-Baselines3 PPO, built exactly as ``python -m training.train_ppo --config CONFIG`` builds
 it (the config's env options, network, rollout, minibatch, epochs; VecMonitor and
 VecNormalize; the batched env behind :class:`training.sb3_vec.BatchedSB3VecEnv`), learns for
-``--steps`` env steps after a warm-up update; its env-steps/s include rollouts and updates.
+``--steps`` env steps after a warm-up update; its env-steps/s include rollouts and updates (a
+config with a teacher is timed in its PPO phase, from a fresh network: the imitation before it
+is not PPO).
 Rows:
 
 * PPO with the batched env on one numba thread and torch on one thread throughout (the
@@ -55,7 +57,9 @@ def ppo_steps_per_s(cfg, steps: int, env_threads: int, update_threads: int) -> f
         cfg.n_envs, 0, cfg.train_env_kwargs(), "batched", cfg.env_id, cfg.action_map(),
         num_threads=env_threads, max_episode_steps=cfg.train_max_episode_steps(),
     )  # fmt: skip
-    vecnorm = VecNormalize(VecMonitor(venv), norm_obs=True, norm_reward=True, gamma=cfg.gamma)
+    vecnorm = VecNormalize(
+        VecMonitor(venv), norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma
+    )
     with tempfile.TemporaryDirectory() as tmp:
         model = make_model(cfg, vecnorm, Path(tmp))
         callback = threads_callback(1, update_threads)
