@@ -82,3 +82,25 @@ def test_a_truncated_snapshot_is_not_taken_for_a_policy(tmp_path):
     shutil.copytree(POLICY / "final", run / "final.prev")  # the kept previous snapshot
     assert find_snapshot(run, "final") == run / "final.prev"
     load_policy(run, "final")
+
+
+SCRATCH = POLICY.parent / "ppo_from_scratch"
+
+
+def test_committed_from_scratch_policy_learned_without_a_teacher_and_walks():
+    """policies/ppo_from_scratch: PPO from a random network (no teacher, no imitation), the
+    network + PD about the reference at run time, walking from a held-out mid-stride start."""
+    import torch
+
+    from training.policy_io import available, load_policy, policy_actor
+    from training.rollouts import run_episodes
+
+    torch.set_num_threads(1)
+    policy, norm, cfg, state = load_policy(SCRATCH, "final")
+    assert cfg.teacher == "" and cfg.base_controller == "" and cfg.bc_anchor_steps == 0
+    assert not available(SCRATCH, "imitation")  # no warm start of any kind
+    assert cfg.reward == "tracking" and cfg.action == "pd" and cfg.rsi > 0
+    kw = cfg.env_kwargs()
+    assert "rsi" not in kw and kw["preset"] == "default" and kw["start"] == "midstride"
+    (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id)
+    assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
