@@ -46,20 +46,12 @@ def _config(path: str):
 def ppo_steps_per_s(cfg, steps: int, env_threads: int, update_threads: int) -> float:
     """Env steps per second of PPO.learn on the batched env (rollouts and updates)."""
     import torch
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from training.sb3_vec import make_sb3_vec_env
-    from training.train_ppo import make_model
+    from training.train_ppo import make_model, training_env
     from training.train_ppo import update_threads as threads_callback
 
     torch.set_num_threads(1)
-    venv = make_sb3_vec_env(
-        cfg.n_envs, 0, cfg.train_env_kwargs(), "batched", cfg.env_id, cfg.action_map(),
-        num_threads=env_threads, max_episode_steps=cfg.train_max_episode_steps(),
-    )  # fmt: skip
-    vecnorm = VecNormalize(
-        VecMonitor(venv), norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma
-    )
+    venv, vecnorm = training_env(cfg, 0, env_threads=env_threads)
     with tempfile.TemporaryDirectory() as tmp:
         model = make_model(cfg, vecnorm, Path(tmp))
         callback = threads_callback(1, update_threads)

@@ -347,17 +347,8 @@ class ConstrainedBipedEnv(gym.Env):
             forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
             self._sim.set(0, state, forces)
             start_clocks(self._clock, self.tracking, slot, self._sim)
-        elif self.tracking is not None and self.tracking.ref is not None:
-            self.tracking.draw_starts(
-                self.params, self.options, self._sim, slot, [self.np_random], self.start,
-                self.posture, self.reset_noise_scale,
-            )  # fmt: skip
         else:
-            draw_starts(
-                self.params, self.options, self._sim, slot, [self.np_random], self.start,
-                self.posture, self.reset_noise_scale,
-            )  # fmt: skip
-            start_clocks(self._clock, None, slot, self._sim)
+            draw_episode_starts(self, self._sim, slot, [self.np_random], self._clock, self.tracking)
         self._needs_reset = False
         self._observe()
         info = self._info((), (0.0,) * len(REWARD_TERMS), None)
@@ -406,7 +397,7 @@ class ConstrainedBipedEnv(gym.Env):
         if self._clock is None:
             return buf.obs[0].copy(), reward, reason is not None, False, info
         self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
-        if self.tracking is not None and self.tracking.ref is not None:
+        if self.tracking is not None:
             self.tracking.after_period(sim.ist[:1, 2])
         if self._track_reward:
             track = self.tracking.reward(
@@ -491,6 +482,24 @@ def make_clock_and_tracking(n: int, env: ConstrainedBipedEnv):
     if ts["needs_reference"] or ts["action"] == "pd":
         tracking = Tracking(n, ts, env.torque_limit_nm, clock)
     return clock, tracking
+
+
+def draw_episode_starts(env: ConstrainedBipedEnv, sim, idx: np.ndarray, rngs, clock, tracking):
+    """Sampled starts of slots ``idx`` (slot ``idx[k]`` draws from ``rngs[k]``), clocks started.
+
+    ``env`` gives the start settings. With a tracking reference, its reference-state starts and
+    clock placement (:meth:`~.tracking.Tracking.draw_starts`); else the env's own starts.
+    """
+    if tracking is not None and tracking.ref is not None:
+        tracking.draw_starts(
+            env.params, env.options, sim, idx, rngs, env.start, env.posture,
+            env.reset_noise_scale,
+        )  # fmt: skip
+        return
+    draw_starts(
+        env.params, env.options, sim, idx, rngs, env.start, env.posture, env.reset_noise_scale
+    )
+    start_clocks(clock, None, idx, sim)
 
 
 def start_clocks(clock, tracking, idx: np.ndarray, sim) -> None:

@@ -116,6 +116,11 @@ def nb_carve(buf, start, rows, cols):
     return buf[start : start + rows * cols].reshape((rows, cols))
 
 
+def wrap_angles(a):
+    """Angles (array or scalar) wrapped to [-pi, pi) [rad], in numpy (for Python callers)."""
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
 @njit_noalloc
 def nb_wrap(a):
     """Angle wrapped to (-pi, pi] [rad]."""

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .clock import ContactClock
+from .hybrid import wrap_angles
 from .model import N_ACTUATED, N_LINKS
 from .reference import REFERENCES, Reference, load_reference
 from .starts import draw_starts, start_slots
@@ -134,7 +135,6 @@ class Tracking:
 
     def __init__(self, n: int, settings: dict, torque_limit_nm: float, clock: ContactClock):
         """Load the reference (when an option needs it) and index its phase tables."""
-        self.n = n
         self.settings = settings
         self.clock = clock
         self.limit = float(torque_limit_nm)
@@ -251,7 +251,7 @@ class Tracking:
         """
         ref = self.rows()
         err = (
-            np.sum(_wrap(q - ref[:, :N_LINKS]) ** 2, axis=1),
+            np.sum(wrap_angles(q - ref[:, :N_LINKS]) ** 2, axis=1),
             np.sum((qd - ref[:, N_LINKS : 2 * N_LINKS]) ** 2, axis=1),
             (hip[:, 1] - ref[:, 13]) ** 2,
             (hip[:, 2] - ref[:, 14]) ** 2,
@@ -263,13 +263,3 @@ class Tracking:
         out[:, -2] = TRACKING_STEP_BONUS * steps
         out[:, -1] = out[:, :-1].sum(axis=1)
         return out
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped into [-pi, pi)."""
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
-def pd_action_bound() -> np.ndarray:
-    """The PD-target action bound: 1 per actuated joint."""
-    return np.ones(N_ACTUATED, np.float32)

@@ -22,6 +22,7 @@ from .actions import PD_BOUND, action_config, validate_actions
 from .env import (
     TRACK_KEYS,
     ConstrainedBipedEnv,
+    draw_episode_starts,
     make_clock_and_tracking,
     observations,
     start_clocks,
@@ -30,7 +31,7 @@ from .model import N_ACTUATED
 from .period import EnvBuffers
 from .rewards import REWARD_TERMS, TERMINATION_FALL, TERMINATION_NON_FINITE, reward_config
 from .simulator import evaluate
-from .starts import check_start_state, draw_starts, state_from_options
+from .starts import check_start_state, state_from_options
 from .state import STATUS_NONFINITE
 from .tasks import MAX_EPISODE_STEPS
 from .validation import check_int
@@ -121,19 +122,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     def _reset_slots(self, idx: np.ndarray) -> None:
         """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
-        p = self._proto
         rngs = [self._rngs[i] for i in idx]
-        if self.tracking is not None and self.tracking.ref is not None:
-            self.tracking.draw_starts(
-                self.params, self.options, self._sim, idx, rngs, p.start, p.posture,
-                p.reset_noise_scale,
-            )  # fmt: skip
-        else:
-            draw_starts(
-                self.params, self.options, self._sim, idx, rngs, p.start, p.posture,
-                p.reset_noise_scale,
-            )  # fmt: skip
-            start_clocks(self._clock, None, idx, self._sim)
+        draw_episode_starts(self._proto, self._sim, idx, rngs, self._clock, self.tracking)
         self._elapsed[idx] = 0
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
@@ -194,7 +184,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             stepped = np.ones(self.num_envs, bool)
             stepped[resetting] = False
             self._clock.advance(buf.sim.ist[:, 0], buf.sim.ist[:, 2], stepped)
-            if self.tracking is not None and self.tracking.ref is not None:
+            if self.tracking is not None:
                 self.tracking.after_period(buf.sim.ist[:, 2])
         status = buf.sim.status
         fell = buf.fell.astype(bool)

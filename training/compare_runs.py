@@ -40,7 +40,7 @@ def differences(cfg, base) -> str:
 def evaluate_run(run: Path, which: str, seeds: list[int]) -> dict:
     """One run's snapshot on ``seeds``: the summary of :func:`training.rollouts.summarize`."""
     policy, norm, cfg, state = load_policy(run, which)
-    start = "midstride" if cfg.start == "mixed" else cfg.start
+    start = cfg.evaluation_start()
     cfg = replace(cfg, start=start)
     eps = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), seeds, cfg.env_id)
     row = summarize(f"{run.name} ({which})", eps)

@@ -243,7 +243,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error(str(e))
     import biped_constraint_env  # noqa: F401  (compiles on a machine's first run)
 
-    start = args.start or ("midstride" if cfg.start == "mixed" else cfg.start)
+    start = args.start or cfg.evaluation_start()
     cfg = replace(cfg, start=start)
     if args.dt is not None:
         cfg = replace(cfg, dt=args.dt)

@@ -41,6 +41,7 @@ import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
 from biped_constraint_env.clock import at_rest as _at_rest
+from biped_constraint_env.hybrid import wrap_angles
 from biped_constraint_env.kinematics import nb_kin_point, nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, BipedParams, paper_biped
 from biped_constraint_env.modes import Mode
@@ -103,10 +104,6 @@ DEFAULT_GAINS: dict[str, float] = {
     "w_force": 1.0,  # weight of the force-target rows
     "reg": 0.0001,  # Tikhonov regularisation of the torques
 }
-
-
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 def _smooth(x: float) -> float:
@@ -246,7 +243,7 @@ class ModelController:
         g = self.g if gains is None else gains
         m = int(state.mode)
         q, qd = state.q, state.qd
-        y, yd = _wrap(_C @ q + _C0), _C @ qd
+        y, yd = wrap_angles(_C @ q + _C0), _C @ qd
         pts = keypoints(self.params, state)
         hy = pts["hip"][0] - pts["stance_toe"][0]
         _, Jhip, ahip0 = self._point(state, "hip", 0)
@@ -255,7 +252,7 @@ class ModelController:
         rows: list[tuple[float, np.ndarray, float]] = []  # weight, row over tau, target
 
         def track(k, ref, kp=g["kp"], kd=g["kd"]):
-            des = kp * np.clip(_wrap(ref - y[k]), -g["emax"], g["emax"]) - kd * yd[k]
+            des = kp * np.clip(wrap_angles(ref - y[k]), -g["emax"], g["emax"]) - kd * yd[k]
             rows.append((1.0, _C[k] @ A, des - _C[k] @ b))
 
         def damp(k):

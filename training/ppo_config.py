@@ -130,6 +130,10 @@ class PPOConfig:
             **({"reference_obs": True} if self.reference_obs else {}),
         }
 
+    def evaluation_start(self) -> str:
+        """The start evaluations use: the config's, mid-stride for one trained on both."""
+        return "midstride" if self.start == "mixed" else self.start
+
     def train_env_kwargs(self) -> dict:
         """Keyword arguments of the training env: :meth:`env_kwargs` with ``rsi``.
 

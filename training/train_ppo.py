@@ -415,13 +415,40 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     )
 
 
+def training_env(cfg: PPOConfig, seed: int, monitor_file: Path | None = None, env_threads=None):
+    """The training env of a config: (VecMonitor of the SB3 VecEnv, VecNormalize over it).
+
+    The config's training env options (with ``rsi``), its time limit and action map;
+    ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy normalises its
+    observations itself (fixed statistics), so VecNormalize normalises only the returns.
+    """
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from training.sb3_vec import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(
+        cfg.n_envs,
+        seed,
+        cfg.train_env_kwargs(),
+        cfg.vec,
+        cfg.env_id,
+        cfg.action_map(),
+        num_threads=cfg.env_threads if env_threads is None else env_threads,
+        max_episode_steps=cfg.train_max_episode_steps(),
+    )
+    venv = VecMonitor(
+        venv,
+        None if monitor_file is None else str(monitor_file),
+        info_keywords=("steps_completed", "hip_y", "termination_reason"),
+    )
+    vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
+    return venv, vecnorm
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Train (or resume) and write the run directory."""
     import torch
     from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
-
-    from training.sb3_vec import make_sb3_vec_env
 
     cfg, run = _resolve(argv)
     for name, allowed in (("lr_schedule", ("constant", "linear")), ("select_by", ("mean", "min"))):
@@ -431,26 +458,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
-    venv = make_sb3_vec_env(
-        cfg.n_envs,
-        TRAIN_SEED_OFFSET + cfg.seed,
-        cfg.train_env_kwargs(),
-        cfg.vec,
-        cfg.env_id,
-        cfg.action_map(),
-        num_threads=cfg.env_threads,
-        max_episode_steps=cfg.train_max_episode_steps(),
-    )
     resuming = available(run, "checkpoint")
     start = load_state(find_snapshot(run, "checkpoint"))["num_timesteps"] if resuming else 0
     # one monitor file per session, named by the env step it starts from
-    venv = VecMonitor(
-        venv,
-        str(run / f"{start}.monitor.csv"),
-        info_keywords=("steps_completed", "hip_y", "termination_reason"),
-    )
-    # with a teacher the policy normalises observations itself (fixed statistics)
-    vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
+    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, run / f"{start}.monitor.csv")
     try:
         return _train(cfg, run, venv, vecnorm, start, resuming)
     finally:
