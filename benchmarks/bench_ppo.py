@@ -17,6 +17,8 @@ Rows:
   idle then), the setting for one training process on 2 cores;
 * PPO with the env on two numba threads next to torch on one (the oversubscription the
   one-thread default avoids);
+* two PPO processes side by side (two training seeds at once, as ``training.sweep`` or two
+  shells run them), each on one env and one torch thread: the sum of their rates;
 * the batched env alone on one thread, stepped with actions drawn as the config's initial
   policy draws them (Gaussian about 0 with its initial std, clipped).
 
@@ -43,25 +45,56 @@ def _config(path: str):
     return parse_config(PPOConfig, ["--config", path], "bench")
 
 
-def ppo_steps_per_s(cfg, steps: int, env_threads: int, update_threads: int) -> float:
-    """Env steps per second of PPO.learn on the batched env (rollouts and updates)."""
+def ppo_steps_per_s(
+    cfg, steps: int, env_threads: int, update_threads: int, barrier=None, seed: int = 0
+) -> float:
+    """Env steps per second of PPO.learn on the batched env (rollouts and updates).
+
+    ``barrier``: a multiprocessing barrier that the timed learning waits on after the warm-up
+    (two processes side by side start timing together).
+    """
     import torch
 
     from training.train_ppo import make_model, training_env
     from training.train_ppo import update_threads as threads_callback
 
     torch.set_num_threads(1)
-    venv, vecnorm = training_env(cfg, 0, env_threads=env_threads)
+    venv, vecnorm = training_env(cfg, seed, env_threads=env_threads)
     with tempfile.TemporaryDirectory() as tmp:
         model = make_model(cfg, vecnorm, Path(tmp))
         callback = threads_callback(1, update_threads)
         model.learn(total_timesteps=cfg.n_envs * cfg.n_steps, callback=callback)  # warm-up
+        if barrier is not None:
+            barrier.wait()
         t0 = time.perf_counter()
         model.learn(total_timesteps=steps, reset_num_timesteps=False, callback=callback)
         rate = steps / (time.perf_counter() - t0)
     torch.set_num_threads(1)
     venv.close()
     return rate
+
+
+def _side_by_side_worker(config: str, steps: int, seed: int, barrier, out) -> None:
+    out.put(ppo_steps_per_s(_config(config), steps, 1, 1, barrier, seed))
+
+
+def two_ppo_steps_per_s(config: str, steps: int) -> float:
+    """Total env steps per second of two PPO processes side by side (e.g. two seeds at once),
+    each with the env and torch on one thread: the sum of their rates, timed together."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    barrier, out = ctx.Barrier(2), ctx.Queue()
+    procs = [
+        ctx.Process(target=_side_by_side_worker, args=(config, steps, seed, barrier, out))
+        for seed in (0, 1)
+    ]
+    for p in procs:
+        p.start()
+    rates = [out.get() for _ in procs]
+    for p in procs:
+        p.join()
+    return sum(rates)
 
 
 def env_steps_per_s(cfg, steps: int, env_threads: int) -> float:
@@ -99,6 +132,9 @@ def main(argv=None) -> int:
             cfg, a.steps, 1, 2
         ),
         "PPO, env 2 threads, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 2, 1),
+        "two PPO processes side by side, 1 + 1 threads each, in total": lambda: two_ppo_steps_per_s(
+            a.config, a.steps
+        ),
         "the batched env alone, 1 thread": lambda: env_steps_per_s(cfg, a.steps, 1),
     }
     best: dict[str, float] = {}

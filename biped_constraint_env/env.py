@@ -182,6 +182,7 @@ class ConstrainedBipedEnv(gym.Env):
     | action | "torque" | | "torque" or "pd": PD targets in [-1, 1]^5 (below) |
     | pd_around, pd_range | "fixed", 1.0 | | targets about ``pd_pose`` or the reference [rad] |
     | pd_pose, pd_gain_scale | Fig. 2, 1.0 | | the fixed pose q1..q5 [rad]; Kp x s, Kd x sqrt(s) |
+    | pd_offset | zeros | | constant offset of the PD targets q1..q5 [rad] |
     | reference_obs | False | | append the reference's q and q-dot at the clock (12) |
     | render_mode | None | | "rgb_array" or "human" |
 
@@ -207,8 +208,8 @@ class ConstrainedBipedEnv(gym.Env):
       an episode's end raises, a start drawn below the ground is drawn again. Added:
       ``start="mixed"``, ``phase_obs``; the batched env's ``num_threads`` (default 1).
       Added: the tracking task's options (``reward``, ``reference``, ``rsi``, ``action``,
-      ``pd_around``, ``pd_range``, ``pd_pose``, ``pd_gain_scale``, ``reference_obs``); the
-      defaults leave the env as it was.
+      ``pd_around``, ``pd_range``, ``pd_pose``, ``pd_gain_scale``, ``pd_offset``,
+      ``reference_obs``); the defaults leave the env as it was.
 
     Example:
         >>> import gymnasium as gym
@@ -257,6 +258,7 @@ class ConstrainedBipedEnv(gym.Env):
         reference_obs: bool = False,
         pd_gain_scale: float = 1.0,
         pd_pose=None,
+        pd_offset=None,
         render_mode: str | None = None,
         **unknown: Any,
     ):
@@ -302,7 +304,7 @@ class ConstrainedBipedEnv(gym.Env):
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
         self.tracking_settings = check_tracking_settings(
             self.start, reward, reference, rsi, action, pd_around, pd_range, reference_obs,
-            pd_gain_scale, pd_pose,
+            pd_gain_scale, pd_pose, pd_offset,
         )  # fmt: skip
         ts = self.tracking_settings
         self.pd_action = ts["action"] == "pd"

@@ -19,11 +19,13 @@ phase. The default env uses none of it.
   observation (12 entries, after the phase entries of ``phase_obs``), so that a policy sees
   its target at run time. Without it a policy sees the phase only (``phase_obs``: the
   first-step flag and the time in the model, which with the model one-hot is the clock).
-* ``action="pd"``: the action in [-1, 1]^5 sets joint targets ``pose + pd_range * a``
+* ``action="pd"``: the action in [-1, 1]^5 sets joint targets
+  ``pose + pd_offset + pd_range * a``
   [rad] for q1..q5, where ``pose`` is a fixed pose, ``pd_pose`` (default
   :data:`PD_FIXED_POSE_RAD`; ``pd_around="fixed"``, the default: no reference at run time),
   or the reference's q at the
-  clock (``pd_around="reference"``); the torques ``Kp (target - q) + Kd (rate - q-dot)``
+  clock (``pd_around="reference"``), plus a constant ``pd_offset`` [rad] (default 0; as
+  legged-robot RL's default joint offsets); the torques ``Kp (target - q) + Kd (rate - q-dot)``
   (:data:`PD_KP` x ``pd_gain_scale``, :data:`PD_KD` x its square root; ``rate`` is 0 about
   the fixed pose and the reference's q-dot about the reference), clipped to the torque
   limit, are held over the period.
@@ -69,6 +71,8 @@ PD_GAIN_SCALE_MAX = 100.0
 PD_RANGE_RAD = 1.0
 """Default half-range of the PD targets around the pose [rad] (``pd_range``)."""
 PD_RANGE_MAX_RAD = 3.0
+PD_OFFSET_MAX_RAD = 1.0
+"""Bound of each ``pd_offset`` entry [rad]."""
 PD_FIXED_POSE_RAD = np.array([-0.1, 0.1, -0.3, -0.4, 0.7])
 """The default ``pd_pose`` of ``pd_around="fixed"``: q1..q5 of the Fig. 2 rest posture [rad]."""
 ACTIONS = ("torque", "pd")
@@ -87,6 +91,7 @@ def check_tracking_settings(
     reference_obs,
     pd_gain_scale=1.0,
     pd_pose=None,
+    pd_offset=None,
 ) -> dict:
     """The validated tracking options of an env (see the module docstring).
 
@@ -108,6 +113,9 @@ def check_tracking_settings(
         "pd_pose": PD_FIXED_POSE_RAD.copy()
         if pd_pose is None
         else check_array("pd_pose", pd_pose, (N_ACTUATED,), np.pi, " [rad]"),
+        "pd_offset": np.zeros(N_ACTUATED)
+        if pd_offset is None
+        else check_array("pd_offset", pd_offset, (N_ACTUATED,), PD_OFFSET_MAX_RAD, " [rad]"),
     }
     if reference is None:
         reference = "rest" if start in ("rest", "mixed") else "midstride"
@@ -233,7 +241,8 @@ class Tracking:
             pose, rate = rows[:, 1:N_LINKS], rows[:, N_LINKS + 1 : 2 * N_LINKS]
         else:
             pose, rate = self.settings["pd_pose"], 0.0
-        target = pose + self.settings["pd_range"] * np.clip(actions, -1.0, 1.0)
+        offset = self.settings["pd_offset"]
+        target = pose + offset + self.settings["pd_range"] * np.clip(actions, -1.0, 1.0)
         tau = self.kp * (target - q[:, 1:]) + self.kd * (rate - qd[:, 1:])
         return np.clip(tau, -self.limit, self.limit)
 

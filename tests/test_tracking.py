@@ -87,16 +87,19 @@ def test_env_reward_is_the_sum_of_the_tracking_terms_in_info():
     assert seen >= 1
 
 
-def test_pd_targets_give_the_documented_torques():
+@pytest.mark.parametrize("offset", [None, [0.2, -0.1, 0.0, 0.3, -0.5]])
+def test_pd_targets_give_the_documented_torques(offset):
+    off = np.zeros(5) if offset is None else np.array(offset)
     for around in ("fixed", "reference"):
-        env = ConstrainedBipedEnv(action="pd", pd_around=around, pd_range=0.5)
+        env = ConstrainedBipedEnv(action="pd", pd_around=around, pd_range=0.5, pd_offset=offset)
         env.reset(seed=3)
         st = env.state
         pose = env.tracking.rows()[0, 1:6] if around == "reference" else PD_FIXED_POSE_RAD
         rate = env.tracking.rows()[0, 7:12] if around == "reference" else 0.0
         a = np.array([0.2, -0.4, 1.0, 0.0, -1.0], np.float32)
         _, _, _, _, info = env.step(a)
-        want = PD_KP * (pose + 0.5 * a.astype(np.float64) - st.q[1:]) + PD_KD * (rate - st.qd[1:])
+        target = pose + off + 0.5 * a.astype(np.float64)
+        want = PD_KP * (target - st.q[1:]) + PD_KD * (rate - st.qd[1:])
         np.testing.assert_allclose(info["torque"], np.clip(want, -150, 150))
     assert env.action_space.high.tolist() == [1.0] * 5
     env = ConstrainedBipedEnv(action="pd", out_of_range="raise")
@@ -105,7 +108,10 @@ def test_pd_targets_give_the_documented_torques():
         env.step(np.full(5, 1.5))
 
 
-@pytest.mark.parametrize("kw", [TRACK, {"action": "pd"}, {"action": "pd", "rsi": 0.3}])
+@pytest.mark.parametrize(
+    "kw",
+    [TRACK, {"action": "pd"}, {"action": "pd", "rsi": 0.3, "pd_offset": [0.2, 0, 0, 0, 0]}],
+)
 def test_tracking_options_single_equals_batched(kw):
     n = 5
     venv = gym.make_vec("ConstrainedBiped-v0", num_envs=n,
@@ -211,7 +217,8 @@ def test_default_env_is_unchanged_by_the_tracking_options_defaults():
     "kw, name",
     [({"reward": "imitate"}, "reward"), ({"rsi": 1.5}, "rsi"), ({"action": "pos"}, "action"),
      ({"pd_around": "teacher"}, "pd_around"), ({"pd_range": 0.0}, "pd_range"),
-     ({"reference": "backwards"}, "reference"), ({"reference_obs": 1}, "reference_obs")],
+     ({"reference": "backwards"}, "reference"), ({"reference_obs": 1}, "reference_obs"),
+     ({"pd_offset": [0.2, 0, 0, 0]}, "pd_offset"), ({"pd_offset": [1.5, 0, 0, 0, 0]}, "pd_offset")],
 )  # fmt: skip
 def test_bad_tracking_options_are_refused_by_name(kw, name):
     with pytest.raises(ValueError, match=name):

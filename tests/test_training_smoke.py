@@ -175,7 +175,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     """The from-scratch recipe's pipeline: PD targets, tracking reward, reference starts in
     training only; evaluate and compare_runs rebuild the run-time env from the config."""
     from training import compare_runs, train_ppo
-    from training.policy_io import read_config
+    from training.policy_io import load_policy, read_config
 
     small = ["--total-timesteps", "512", "--n-envs", "4", "--n-steps", "64", "--batch-size",
              "128", "--n-epochs", "1", "--eval-freq", "256", "--eval-episodes", "1",
@@ -183,11 +183,17 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     small += ["--out-dir", str(tmp_path)]
     config = "training/configs/ppo_from_scratch.toml"
     assert train_ppo.main(["--config", config, *small]) == 0
-    assert train_ppo.main(["--config", config, *small, "--seed", "1", "--rsi", "0"]) == 0
+    relu = ["--seed", "1", "--rsi", "0", "--activation", "relu"]
+    assert train_ppo.main(["--config", config, *small, *relu]) == 0
+    with pytest.raises(SystemExit, match="activation"):
+        train_ppo.main(["--config", config, *small, "--activation", "sigmoid"])
     run0, run1 = sorted((tmp_path / "train_ppo").iterdir())
     cfg = read_config(run0)
     assert cfg.action == "pd" and cfg.reward == "tracking" and cfg.rsi > 0
     assert "rsi" not in cfg.env_kwargs() and cfg.train_env_kwargs()["rsi"] == cfg.rsi
+    assert cfg.env_kwargs()["pd_offset"] == list(cfg.pd_offset) and cfg.pd_offset[0] > 0
+    kinds = [{type(m).__name__ for m in load_policy(r)[0].modules()} for r in (run0, run1)]
+    assert "Tanh" in kinds[0] and "ReLU" not in kinds[0] and "ReLU" in kinds[1]
     seen = []
     real = compare_runs.run_episodes
 
@@ -201,7 +207,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     assert compare_runs.main(argv) == 0
     rows = json.loads(out.read_text())["rows"]
     assert [r["training_seed"] for r in rows] == [0, 1]
-    assert rows[1]["changes"] == "rsi=0.0" and "PD" in rows[0]["in_the_loop"]
+    assert rows[1]["changes"] == "rsi=0.0, activation='relu'" and "PD" in rows[0]["in_the_loop"]
     assert all(kw["action"] == "pd" and "rsi" not in kw for kw in seen)
 
 

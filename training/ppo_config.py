@@ -32,6 +32,7 @@ class PPOConfig:
     pd_range: float = 1.0  # half-range of the PD targets [rad]
     pd_gain_scale: float = 1.0  # the PD gains' scale (Kp x it, Kd x its square root)
     pd_pose: tuple[float, ...] = ()  # q1..q5 of the fixed PD pose [rad] (() = the env's)
+    pd_offset: tuple[float, ...] = ()  # constant offset of the PD targets q1..q5 [rad] (() = 0)
     reference_obs: bool = False  # observe the reference's q and q-dot at the clock
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
@@ -57,6 +58,7 @@ class PPOConfig:
     # independent Gaussian noise per period
     sde_sample_freq: int = -1  # with use_sde: periods between new noise matrices (-1: rollout)
     net_arch: tuple[int, ...] = (256, 256)  # hidden layers of the actor and the critic
+    activation: str = "tanh"  # hidden activation: "tanh" (SB3's default), "relu" or "elu"
     torch_threads: int = 1  # torch threads (1: the env and torch do not fight for 2 cores)
     update_threads: int = 0  # torch threads in PPO's updates, when the env is idle
     # (0: torch_threads; 2 on an otherwise idle 2-core machine, 1 with two runs side by side)
@@ -123,6 +125,8 @@ class PPOConfig:
                     "pd_around": self.pd_around,
                     "pd_range": self.pd_range,
                     "pd_gain_scale": self.pd_gain_scale,
+                    **({"pd_pose": list(self.pd_pose)} if self.pd_pose else {}),
+                    **({"pd_offset": list(self.pd_offset)} if self.pd_offset else {}),
                 }  # fmt: skip
                 if self.action == "pd"
                 else {}
@@ -192,7 +196,11 @@ class PPOConfig:
         imitation or by the loaded weights), so that the network alone maps the raw
         observation to its action.
         """
-        kw: dict = {"net_arch": list(self.net_arch), "log_std_init": self.log_std_init}
+        kw: dict = {
+            "net_arch": list(self.net_arch),
+            "log_std_init": self.log_std_init,
+            "activation_fn": activation_fn(self.activation),
+        }
         if self.teacher:
             from training.imitation import FixedNormalizer
 
@@ -202,6 +210,19 @@ class PPOConfig:
                 features_extractor_kwargs={"mean": [0.0] * n, "var": [1.0] * n},
             )
         return kw
+
+
+ACTIVATIONS = ("tanh", "relu", "elu")
+
+
+def activation_fn(name: str):
+    """The torch module class of a hidden activation named in :data:`ACTIVATIONS`."""
+    from torch import nn
+
+    classes = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
+    if name not in classes:
+        raise ValueError(f"activation must be one of {ACTIVATIONS}, got {name!r}")
+    return classes[name]
 
 
 TRAIN_SEED_OFFSET = 1_000_000

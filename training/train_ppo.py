@@ -48,6 +48,7 @@ from training.policy_io import (
     save_snapshot,
 )
 from training.ppo_config import (
+    ACTIVATIONS,
     DEMO_SEED_OFFSET,
     IMITATION_CHECK_SEED_OFFSET,
     SELECTION_SEED_OFFSET,
@@ -357,9 +358,22 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
     return EvalAndCheckpoint()
 
 
+def _check_choices(cfg: PPOConfig) -> None:
+    """Refuse a setting outside its choices before any run directory is made."""
+    choices = (
+        ("lr_schedule", ("constant", "linear")),
+        ("select_by", ("mean", "min")),
+        ("activation", ACTIVATIONS),
+    )
+    for name, allowed in choices:
+        if getattr(cfg, name) not in allowed:
+            raise SystemExit(f"--{name.replace('_', '-')} must be one of {allowed}")
+
+
 def _resolve(argv: Sequence[str] | None) -> tuple[PPOConfig, Path]:
     """The config and run directory: a new run, or a resumed one with its own settings."""
     cfg = parse_config(PPOConfig, argv, __doc__.splitlines()[0])
+    _check_choices(cfg)
     if not cfg.resume:
         return cfg, make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
     run = Path(cfg.resume)
@@ -451,9 +465,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     from stable_baselines3.common.utils import set_random_seed
 
     cfg, run = _resolve(argv)
-    for name, allowed in (("lr_schedule", ("constant", "linear")), ("select_by", ("mean", "min"))):
-        if getattr(cfg, name) not in allowed:
-            raise SystemExit(f"--{name.replace('_', '-')} must be one of {allowed}")
     torch.set_num_threads(cfg.torch_threads)
     (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
