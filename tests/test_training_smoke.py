@@ -204,7 +204,8 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     monkeypatch.setattr(compare_runs, "run_episodes", spy)
     out = tmp_path / "compare.json"
     argv = [str(run0), str(run1), "--which", "final", "--episodes", "2", "--out", str(out)]
-    assert compare_runs.main(argv) == 0
+    assert compare_runs.main([*argv, "--curves", str(tmp_path / "curves.png")]) == 0
+    assert (tmp_path / "curves.png").stat().st_size > 0
     rows = json.loads(out.read_text())["rows"]
     assert [r["training_seed"] for r in rows] == [0, 1]
     assert rows[1]["changes"] == "rsi=0.0, activation='relu'" and "PD" in rows[0]["in_the_loop"]

@@ -2,6 +2,7 @@
 
     python -m training.compare_runs RUN [RUN ...] [--which best final] [--episodes 10]
                                     [--scaffold CONFIG.toml] [--out runs/compare.json]
+                                    [--curves runs/curves.png]
 
 For the training seeds and ablations of a study: each run's ``best`` (selected on the
 selection seeds during training) and/or ``final`` snapshot is evaluated, as ``python -m
@@ -83,6 +84,7 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
     ap.add_argument("--out", type=Path, default=None, help="write the rows as JSON here")
+    ap.add_argument("--curves", type=Path, default=None, help="plot the runs' eval.csv here")
     a = ap.parse_args(argv)
     seeds = list(range(a.seed, a.seed + a.episodes))
     rows = [scaffold_row(a.scaffold, seeds)] if a.scaffold is not None else []
@@ -119,6 +121,17 @@ def main(argv=None) -> int:
             f"| {r['changes']} | {r['in_the_loop']} | {r['steps_mean']:.1f} ± "
             f"{r['steps_std']:.1f}, min {r['steps_min']} | {r['ends']} |"
         )
+    if a.curves is not None and a.runs:
+        from training.plots import selection_curves
+
+        a.curves.parent.mkdir(parents=True, exist_ok=True)
+        labels = []
+        for run in a.runs:
+            cfg = read_config(run)
+            changes = differences(cfg, base)
+            labels.append(f"seed {cfg.seed}" + ("" if changes == "-" else f", {changes}"))
+        selection_curves(a.runs, labels, a.curves)
+        print(f"selection curves: {a.curves}")
     if a.out is not None:
         a.out.parent.mkdir(parents=True, exist_ok=True)
         a.out.write_text(json.dumps({"seeds": seeds, "rows": rows}, indent=1, default=float))

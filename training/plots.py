@@ -153,6 +153,35 @@ def learning_curve(run: Path, path: Path) -> None:
     plt.close(fig)
 
 
+def selection_curves(runs: Sequence[Path], labels: Sequence[str], path: Path) -> None:
+    """Plot the periodic selection evaluations of several runs (their ``eval.csv``).
+
+    The mean and the fewest completed steps of each evaluation against env steps, one colour
+    per run.
+    """
+    import csv
+
+    plt = _mpl()
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), sharey=True)
+    for k, (run, label) in enumerate(zip(runs, labels, strict=True)):
+        with open(Path(run) / "eval.csv") as fh:
+            ev = list(csv.DictReader(fh))
+        x = [int(r["env_steps"]) / 1e6 for r in ev]
+        for ax, key in zip(axes, ("steps_mean", "steps_min"), strict=True):
+            ax.plot(x, [float(r[key]) for r in ev], "o-", ms=3, color=f"C{k}", label=label)
+    axes[0].set_ylabel("completed steps (selection episodes, 30 s)")
+    axes[0].set_title("mean of the selection episodes", fontsize=9)
+    axes[1].set_title("worst selection episode", fontsize=9)
+    for ax in axes:
+        ax.set_xlabel("env steps [millions]")
+        ax.axhline(20, color="k", lw=0.6, ls=":")
+        ax.grid(lw=0.3)
+    axes[1].legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def initiation_strip(frames: Sequence[dict], path: Path, title: str, every_s: float = 0.1) -> None:
     """The start from rest: stick figures, centre of mass and centre of pressure.
 
