@@ -310,12 +310,22 @@ def load_policy(run: Path, which: str = "final"):
 
 
 def policy_actor(policy, normalizer: ObsNormalizer, cfg):
-    """Obs (24,) -> torques (5,) [N m] of the deterministic policy (through its ActionMap)."""
+    """Obs (d,) -> torques (5,) [N m] of the deterministic policy (through its ActionMap)."""
+    batch = policy_batch_actor(policy, normalizer, cfg)
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        return batch(obs[None, :])[0]
+
+    return act
+
+
+def policy_batch_actor(policy, normalizer: ObsNormalizer, cfg):
+    """Obs (n, d) -> torques (n, 5) [N m] of the deterministic policy, one forward for all."""
     amap = cfg.action_map()
 
     def act(obs: np.ndarray) -> np.ndarray:
-        action, _ = policy.predict(normalizer(obs[None, :]), deterministic=True)
-        return amap(action, obs[None, :])[0]
+        action, _ = policy.predict(normalizer(obs), deterministic=True)
+        return amap(action, obs)
 
     return act
 

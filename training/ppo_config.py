@@ -63,7 +63,8 @@ class PPOConfig:
     update_threads: int = 0  # torch threads in PPO's updates, when the env is idle
     # (0: torch_threads; 2 on an otherwise idle 2-core machine, 1 with two runs side by side)
     eval_freq: int = 100_000  # env steps between evaluations (they select best/)
-    eval_episodes: int = 10  # episodes per evaluation, on the selection seeds
+    eval_episodes: int = 10  # episodes per evaluation, on the selection seeds (all at once,
+    # in the batched env)
     select_by: str = "mean"  # best/ is the evaluation with the most steps: "mean" or "min"
     # (the fewest steps of its episodes first, then the mean)
     checkpoint_freq: int = 250_000  # env steps between checkpoints (resume continues there)

@@ -42,7 +42,7 @@ from training.policy_io import (
     load_optimizer,
     load_state,
     load_weights,
-    policy_actor,
+    policy_batch_actor,
     read_config,
     restore_normalizer,
     save_snapshot,
@@ -56,7 +56,7 @@ from training.ppo_config import (
     PPOConfig,
     bc_weights,
 )
-from training.rollouts import run_episodes
+from training.rollouts import run_episodes, run_episodes_batched
 
 RESUME_OVERRIDES = ("total_timesteps", "progress")
 """The settings a resume may change (given as flags); every other one is the run's own."""
@@ -257,6 +257,9 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
     class EvalAndCheckpoint(BaseCallback):
         """Evaluate (steps, distance, termination reasons) and checkpoint periodically.
 
+        The evaluation runs the deterministic policy on ``cfg.eval_episodes`` selection
+        seeds at once in the batched env (:func:`training.rollouts.run_episodes_batched`).
+
         ``best``: the best score so far (carried over by a resume), so that ``best/`` is
         replaced only by a better evaluation.
         """
@@ -309,9 +312,8 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
                     "clip_obs": vecnorm.clip_obs,
                 }
             )
-            actor = policy_actor(self.model.policy, norm, cfg)
-            eps = run_episodes(
-                actor,
+            eps = run_episodes_batched(
+                policy_batch_actor(self.model.policy, norm, cfg),
                 cfg.env_kwargs(),
                 range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + cfg.eval_episodes),
                 cfg.env_id,
