@@ -1,14 +1,15 @@
 """PPO's training throughput on the batched env, side by side with the env alone, in one run.
 
     python -m benchmarks.bench_ppo [--config training/configs/ppo_from_scratch.toml]
-                                   [--steps 200000] [--rounds 2]
+                                   [--steps 200000] [--rounds 2] [TRAIN_PPO FLAGS ...]
 
 Stable-Baselines3 PPO, built exactly as ``python -m training.train_ppo --config CONFIG`` builds
 it (the config's env options, network, rollout, minibatch, epochs; VecMonitor and
 VecNormalize; the batched env behind :class:`training.sb3_vec.BatchedSB3VecEnv`), learns for
 ``--steps`` env steps after a warm-up update; its env-steps/s include rollouts and updates (a
 config with a teacher is timed in its PPO phase, from a fresh network: the imitation before it
-is not PPO).
+is not PPO). Any further flag is a ``train_ppo`` flag that overrides the config (e.g.
+``--net-arch 64 64 --n-envs 128 --n-steps 32``), as on train_ppo's command line.
 Rows:
 
 * PPO with the batched env on one numba thread and torch on one thread throughout (the
@@ -31,6 +32,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -38,11 +40,12 @@ import numpy as np
 DEFAULT_CONFIG = "training/configs/ppo_from_scratch.toml"
 
 
-def _config(path: str):
+def _config(path: str, overrides: Sequence[str] = ()):
+    """The PPOConfig of a train_ppo config file with train_ppo flags on top."""
     from training.common import parse_config
     from training.ppo_config import PPOConfig
 
-    return parse_config(PPOConfig, ["--config", path], "bench")
+    return parse_config(PPOConfig, ["--config", path, *overrides], "bench")
 
 
 def ppo_steps_per_s(
@@ -74,11 +77,11 @@ def ppo_steps_per_s(
     return rate
 
 
-def _side_by_side_worker(config: str, steps: int, seed: int, barrier, out) -> None:
-    out.put(ppo_steps_per_s(_config(config), steps, 1, 1, barrier, seed))
+def _side_by_side_worker(config: str, overrides, steps: int, seed: int, barrier, out) -> None:
+    out.put(ppo_steps_per_s(_config(config, overrides), steps, 1, 1, barrier, seed))
 
 
-def two_ppo_steps_per_s(config: str, steps: int) -> float:
+def two_ppo_steps_per_s(config: str, steps: int, overrides: Sequence[str] = ()) -> float:
     """Total env steps per second of two PPO processes side by side (e.g. two seeds at once),
     each with the env and torch on one thread: the sum of their rates, timed together."""
     import multiprocessing as mp
@@ -86,7 +89,9 @@ def two_ppo_steps_per_s(config: str, steps: int) -> float:
     ctx = mp.get_context("spawn")
     barrier, out = ctx.Barrier(2), ctx.Queue()
     procs = [
-        ctx.Process(target=_side_by_side_worker, args=(config, steps, seed, barrier, out))
+        ctx.Process(
+            target=_side_by_side_worker, args=(config, list(overrides), steps, seed, barrier, out)
+        )
         for seed in (0, 1)
     ]
     for p in procs:
@@ -124,8 +129,8 @@ def main(argv=None) -> int:
     ap.add_argument("--config", default=DEFAULT_CONFIG, help="a train_ppo config (TOML)")
     ap.add_argument("--steps", type=int, default=200_000, help="env steps per PPO timing")
     ap.add_argument("--rounds", type=int, default=2)
-    a = ap.parse_args(argv)
-    cfg = _config(a.config)
+    a, overrides = ap.parse_known_args(argv)
+    cfg = _config(a.config, overrides)
     rows = {
         "PPO, env 1 thread, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 1, 1),
         "PPO, env 1 thread, torch 1 thread (2 in updates)": lambda: ppo_steps_per_s(
@@ -133,7 +138,7 @@ def main(argv=None) -> int:
         ),
         "PPO, env 2 threads, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 2, 1),
         "two PPO processes side by side, 1 + 1 threads each, in total": lambda: two_ppo_steps_per_s(
-            a.config, a.steps
+            a.config, a.steps, overrides
         ),
         "the batched env alone, 1 thread": lambda: env_steps_per_s(cfg, a.steps, 1),
     }
@@ -143,8 +148,9 @@ def main(argv=None) -> int:
             best[key] = max(best.get(key, 0.0), fn())
             print(f"round {r + 1}/{a.rounds}: {key}: {best[key]:,.0f} env-steps/s", flush=True)
     print(
-        f"{a.config}: {cfg.n_envs} envs x {cfg.n_steps} steps, minibatch {cfg.batch_size}, "
-        f"{cfg.n_epochs} epochs, net {list(cfg.net_arch)}; best of {a.rounds} rounds:"
+        f"{' '.join([a.config, *overrides])}: {cfg.n_envs} envs x {cfg.n_steps} steps, "
+        f"minibatch {cfg.batch_size}, {cfg.n_epochs} epochs, net {list(cfg.net_arch)} "
+        f"{cfg.activation}; best of {a.rounds} rounds:"
     )
     for key, rate in best.items():
         print(f"{key}: {rate:,.0f} env-steps/s")
