@@ -123,8 +123,8 @@ def to_toml(cfg: Any) -> str:
     return "\n".join(lines) + "\n"
 
 
-def versions() -> dict[str, str]:
-    """Package versions and the git commit, for the run directory."""
+def versions() -> dict[str, str | bool]:
+    """Package versions, the git commit and whether tracked files differ from it (the run dir)."""
     out = {"python": platform.python_version()}
     for name in (
         "numpy",
@@ -139,17 +139,20 @@ def versions() -> dict[str, str]:
             out[name] = getattr(mod, "__version__", "?")
         except ImportError:
             out[name] = "not installed"
+    here = Path(__file__).resolve().parent
     try:
-        out["git_commit"] = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=Path(__file__).resolve().parent,
-        ).stdout.strip()
+        out["git_commit"] = _git(["rev-parse", "HEAD"], here)
+        # tracked files changed since that commit: the code that ran is not the commit's
+        out["git_dirty"] = bool(_git(["status", "--porcelain", "--untracked-files=no"], here))
     except (OSError, subprocess.CalledProcessError):
         out["git_commit"] = "unknown"
     return out
+
+
+def _git(args: list[str], cwd: Path) -> str:
+    return subprocess.run(
+        ["git", *args], capture_output=True, text=True, check=True, cwd=cwd
+    ).stdout.strip()
 
 
 def make_run_dir(
