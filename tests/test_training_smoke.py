@@ -328,3 +328,16 @@ def test_benchmarks_name_their_extra_before_any_work(monkeypatch, capsys):
         bench_env.main(["--steps", "10"])
     assert ".[bench]" in capsys.readouterr().err
     assert ".[bench]" in accuracy.mujoco_validation(None)["skipped"]
+
+
+def test_bench_ppo_takes_train_ppo_flags_on_top_of_the_config():
+    """``python -m benchmarks.bench_ppo [--config C] FLAGS``: FLAGS are train_ppo's, applied
+    over the config (a variant is timed as it would train); a misspelt flag is refused."""
+    from benchmarks.bench_ppo import DEFAULT_CONFIG, _config
+
+    base = _config(DEFAULT_CONFIG)
+    cfg = _config(DEFAULT_CONFIG, ["--net-arch", "64", "64", "--n-envs", "128"])
+    assert cfg.net_arch == (64, 64) and cfg.n_envs == 128
+    assert cfg.pd_offset == base.pd_offset and cfg.n_steps == base.n_steps  # the rest: config
+    with pytest.raises(SystemExit):
+        _config(DEFAULT_CONFIG, ["--net-arch", "64", "--no-such-flag", "1"])
