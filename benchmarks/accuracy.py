@@ -1,9 +1,10 @@
 """Speed against accuracy: work-precision charts, a stability map, MuJoCo validation.
 
-    python -m benchmarks.accuracy [--quick]
+    python -m benchmarks.accuracy [--quick] [--out DIR]
 
-Writes into benchmarks/results/: work_precision_a.png, work_precision_b.png,
-stability_map.png, accuracy_tables.md and accuracy.json, and prints the tables.
+Writes into runs/accuracy (or ``--out``; ``--out benchmarks/results`` updates the committed
+ones): work_precision_a.png, work_precision_b.png, stability_map.png, accuracy_tables.md and
+accuracy.json, and prints the tables.
 
 Scene (a): model 1 alone (stance foot flat), Table 2's model-1 torques, 1 s from the nominal
 posture at rest, integrated without guards. Reference: RK4 at h = 0.01 ms.
@@ -582,10 +583,11 @@ def main(argv=None) -> int:
         "--out",
         type=Path,
         default=None,
-        help=f"output folder (default: {RESULTS}; with --quick, runs/accuracy_quick)",
+        help=f"output folder (default: runs/accuracy, with --quick runs/accuracy_quick; "
+        f"{RESULTS} updates the committed results)",
     )
     args = ap.parse_args(argv)
-    args.out = args.out or (Path("runs/accuracy_quick") if args.quick else RESULTS)
+    args.out = args.out or Path("runs/accuracy_quick" if args.quick else "runs/accuracy")
     args.out.mkdir(parents=True, exist_ok=True)
     params = paper_biped()
     from training.common import progress

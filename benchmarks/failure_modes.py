@@ -1,4 +1,4 @@
-"""Where methods fail beyond the step size (figures into benchmarks/results/).
+"""Where methods fail beyond the step size (figures into runs/failure_modes, or --out).
 
     python -m benchmarks.failure_modes
 
@@ -21,6 +21,7 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 from pathlib import Path
@@ -131,12 +132,20 @@ def grazing():
 
 
 def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs/failure_modes"),
+        help=f"output folder (default: runs/failure_modes; {RESULTS} updates the committed ones)",
+    )
+    out_dir = ap.parse_args(argv).out
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    RESULTS.mkdir(exist_ok=True)
+    out_dir.mkdir(parents=True, exist_ok=True)
     rows, knee_rows, k_star = conditioning()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     ax = axes[0]
@@ -157,7 +166,7 @@ def main(argv=None) -> int:
     ax.invert_xaxis()
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(RESULTS / "conditioning.png", dpi=110)
+    fig.savefig(out_dir / "conditioning.png", dpi=110)
     plt.close(fig)
     v = np.linspace(-0.01, 0.01, 401)
     fig, ax = plt.subplots(figsize=(6, 3.5))
@@ -172,7 +181,7 @@ def main(argv=None) -> int:
     ax.set_ylabel("friction direction (times K f_n)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(RESULTS / "friction_law.png", dpi=110)
+    fig.savefig(out_dir / "friction_law.png", dpi=110)
     plt.close(fig)
     graz = grazing()
     out = {
@@ -181,8 +190,9 @@ def main(argv=None) -> int:
         "inverse_condition_at_K_0.5": float(np.interp(0.5, rows[:, 0], rows[:, 2])),
         "grazing": graz,
     }
-    (RESULTS / "failure_modes.json").write_text(json.dumps(out, indent=1) + "\n")
+    (out_dir / "failure_modes.json").write_text(json.dumps(out, indent=1) + "\n")
     print(json.dumps(out, indent=1))
+    print(f"wrote {out_dir}")
     return 0
 
 

@@ -46,7 +46,7 @@ from .starts import (
 from .state import STATUS_NONFINITE, STATUS_TERMINATED
 from .tasks import resolve_options, resolve_task
 from .tracking import PD_RANGE_RAD, TRACKING_TERMS, Tracking, check_tracking_settings
-from .validation import check_bool, check_names
+from .validation import check_bool, check_names, check_seeds
 
 TRACK_KEYS = tuple(f"track_{t}" for t in TRACKING_TERMS)
 """The tracking reward's terms in ``info`` (``reward="tracking"``)."""
@@ -340,6 +340,8 @@ class ConstrainedBipedEnv(gym.Env):
     # ---------------------------------------------------------------- Gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode (see the class docstring, Starting State)."""
+        if seed is not None:
+            check_seeds(seed, 1)  # an int >= 0: not a float, a bool or a list
         super().reset(seed=seed)
         self._needs_reset = True  # stays so if this reset is refused
         slot = np.zeros(1, np.int64)

@@ -111,3 +111,18 @@ def check_names(what: str, given: Iterable[Any], valid: Iterable[str]) -> None:
         close = difflib.get_close_matches(str(k), valid, n=1) if isinstance(k, str) else []
         hints.append(f"{k!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
     raise ValueError(f"unknown {what}: {', '.join(hints)}; valid: {', '.join(valid)}")
+
+
+def check_seeds(seed: Any, n: int) -> list[int]:
+    """``seed`` (an int, or a list of ``n`` ints) as ``n`` seeds; anything else is refused."""
+
+    def ok(s: Any) -> bool:
+        return isinstance(s, int | np.integer) and not isinstance(s, bool | np.bool_) and s >= 0
+
+    if ok(seed):
+        return [int(seed) + i for i in range(n)]
+    if not isinstance(seed, list | tuple | np.ndarray) or not all(ok(s) for s in seed):
+        raise ValueError(f"seed must be None, an int >= 0 or a list of {n} ints >= 0, got {seed!r}")
+    if len(seed) != n:
+        raise ValueError(f"seed: expected {n} seeds, got {len(seed)}")
+    return [int(s) for s in seed]

@@ -34,7 +34,7 @@ from .simulator import evaluate
 from .starts import check_start_state, state_from_options
 from .state import STATUS_NONFINITE
 from .tasks import MAX_EPISODE_STEPS
-from .validation import check_int
+from .validation import check_int, check_seeds
 
 MAX_NUM_ENVS = 1_000_000
 """Largest accepted ``num_envs``."""
@@ -130,11 +130,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         """Reset every sub-environment; ``seed`` s seeds sub-environment i with s + i."""
         self._needs_reset = True  # stays so if this reset is refused
         if seed is not None:
-            seeds = (
-                [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
-            )
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"expected {self.num_envs} seeds, got {len(seeds)}")
+            seeds = check_seeds(seed, self.num_envs)
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         if options is not None and not (isinstance(options, dict) and not options):
             state = state_from_options(options)

@@ -20,6 +20,7 @@ import pytest
 
 from training import train_ppo
 from training.policy_io import STATE_FILE, find_snapshot, load_state
+from training.safe_files import write_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--n-envs", "2", "--n-steps", "128", "--batch-size", "128", "--n-epochs", "1"]
@@ -72,6 +73,7 @@ def test_killed_ppo_run_resumes_to_its_own_total_and_keeps_its_best(tmp_path):
     best = run / "best"
     best.mkdir(exist_ok=True)
     (best / STATE_FILE).write_text(json.dumps({"num_timesteps": 0, "score": 1e9}))
+    write_manifest(best)  # a complete snapshot: its manifest is written last
     assert train_ppo.main(["--resume", str(run), "--progress", "false"]) == 0  # no total given
     n = load_state(run / "final")["num_timesteps"]
     assert total <= n < total + 256  # the saved total, not the CLI default (3M)

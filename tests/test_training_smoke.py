@@ -164,11 +164,13 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
 
     assert load_state(run / "final")["num_timesteps"] >= 768
     assert (run / "512.monitor.csv").is_file()  # the resumed session's own monitor
-    assert evaluate.main([str(run), "--episodes", "2"]) == 0
-    summary = json.loads((run / "evaluation.json").read_text())
+    out = tmp_path / "eval"
+    assert evaluate.main([str(run), "--episodes", "2", "--out", str(out)]) == 0
+    summary = json.loads((out / "evaluation.json").read_text())
     (policy,) = summary["results"]
     assert summary["seeds"] == [0, 1] and len(policy["episodes"]) == 2
-    assert (run / "figures" / "best.gif").is_file()
+    assert (out / "figures" / "best.gif").is_file()
+    assert not (run / "evaluation.json").exists()  # the run directory is only read
 
 
 def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, monkeypatch):

@@ -9,14 +9,16 @@ A run directory ``runs/<script>/<env_id>__seed<seed>__<YYYYmmdd-HHMMSS>/`` is cr
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import datetime as _dt
 import json
+import math
+import os
 import platform
 import subprocess
 import sys
-import tomllib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar, get_type_hints
 
@@ -24,6 +26,7 @@ C = TypeVar("C")
 
 
 def _coerce(kind: Any, value: Any, name: str) -> Any:
+    """``value`` (from TOML or a flag) as the field's type; ValueError naming ``name``."""
     if kind is bool:
         if isinstance(value, bool):
             return value
@@ -33,13 +36,47 @@ def _coerce(kind: Any, value: Any, name: str) -> Any:
             return False
         raise ValueError(f"{name} must be true or false, got {value!r}")
     if kind is Path:
+        if not isinstance(value, str | Path):
+            raise ValueError(f"{name} must be a path, got {value!r}")
         return Path(value)
     if getattr(kind, "__origin__", None) is tuple:
         (elem, *_) = kind.__args__
-        return tuple(elem(v) for v in value)
-    if kind is int and isinstance(value, float) and not value.is_integer():
-        raise ValueError(f"{name} must be an integer, got {value!r}")
+        if not isinstance(value, list | tuple) or len(value) > 64:
+            raise ValueError(f"{name} must be a list of at most 64 values, got {value!r}")
+        return tuple(_coerce(elem, v, name) for v in value)
+    if kind in (int, float):
+        if isinstance(value, bool) or isinstance(value, list | dict):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        if kind is int and isinstance(value, float) and not value.is_integer():
+            raise ValueError(f"{name} must be an integer, got {value!r}")
+        try:
+            out = kind(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be {'an integer' if kind is int else 'a number'}, "
+                             f"got {value!r}") from None  # fmt: skip
+        if kind is float and not math.isfinite(out):
+            raise ValueError(f"{name} must be finite, got {value!r}")
+        return out
+    if kind is str:
+        if not isinstance(value, str):
+            raise ValueError(f"{name} must be a string, got {value!r}")
+        return value
     return kind(value)
+
+
+def config_from_mapping(cls: type[C], data: dict[str, Any], source: str) -> C:
+    """``cls`` from a mapping (a TOML file's): unknown keys and bad values raise ValueError.
+
+    A ``validate()`` method of ``cls``, if any, checks ranges and choices.
+    """
+    hints = get_type_hints(cls)
+    unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
+    if unknown:
+        raise ValueError(f"{source}: unknown keys {sorted(unknown)}")
+    cfg = cls(**{k: _coerce(hints[k], v, k) for k, v in data.items()})
+    if hasattr(cfg, "validate"):
+        cfg.validate()
+    return cfg
 
 
 def field_help(cls: type) -> dict[str, str]:
@@ -64,46 +101,67 @@ def field_help(cls: type) -> dict[str, str]:
     return out
 
 
+class CliParser(argparse.ArgumentParser):
+    """argparse with one line per refusal: ``PROG: error: WHAT (see --help)``, exit status 1.
+
+    The message travels in the ``SystemExit`` (a test can match it); no usage block is
+    printed above it.
+    """
+
+    def error(self, message: str):
+        """Refuse with one line naming the flag or file."""
+        raise SystemExit(f"{self.prog}: error: {message} (see --help)")
+
+
 def _parser(cls: type, description: str) -> argparse.ArgumentParser:
     hints = get_type_hints(cls)
     helps = field_help(cls)
-    parser = argparse.ArgumentParser(description=description)
+    parser = CliParser(description=description)
     parser.add_argument("--config", type=Path, help="TOML file of field = value pairs")
     for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
         kind = hints[f.name]
         text = f"{helps.get(f.name, '')} (default: {f.default})".strip()
         if getattr(kind, "__origin__", None) is tuple:
-            parser.add_argument(flag, nargs="+", default=None, help=text, metavar="V")
+            elem = kind.__args__[0]
+            parser.add_argument(
+                flag, nargs="+", type=elem, default=None, help=text, metavar=elem.__name__.upper()
+            )
         elif kind is bool:  # a bare flag means true; "--flag false" still reads
             parser.add_argument(
                 flag, nargs="?", const="true", default=None, help=text, metavar="BOOL"
             )
         else:
-            parser.add_argument(flag, default=None, help=text, metavar="V")
+            metavar = {int: "INT", float: "X", Path: "PATH"}.get(kind, "S")
+            typ = kind if kind in (int, float) else None
+            parser.add_argument(flag, type=typ, default=None, help=text, metavar=metavar)
     return parser
 
 
 def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> C:
-    """Build ``cls`` from defaults, an optional TOML file and CLI flags (in that precedence)."""
-    hints = get_type_hints(cls)
-    args = _parser(cls, description).parse_args(argv)
+    """Build ``cls`` from defaults, an optional TOML file and CLI flags (in that precedence).
+
+    Every refusal (a missing or malformed file, an unknown key, a value of the wrong type or
+    out of range) is one line from argparse (exit status 2), before anything is written.
+    """
+    from training.safe_files import UntrustedFileError, read_toml
+
+    parser = _parser(cls, description)
+    args = parser.parse_args(argv)
     values: dict[str, Any] = {}
     if args.config is not None:
-        if not args.config.is_file():
-            raise SystemExit(f"--config: no such file {args.config}")
-        with open(args.config, "rb") as fh:
-            data = tomllib.load(fh)
-        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ValueError(f"{args.config}: unknown keys {sorted(unknown)}")
-        values.update(data)
+        try:
+            values.update(read_toml(args.config))
+        except UntrustedFileError as e:
+            parser.error(f"--config: {e}")
     for f in dataclasses.fields(cls):
         v = getattr(args, f.name)
         if v is not None:
             values[f.name] = v
-    kwargs = {k: _coerce(hints[k], v, k) for k, v in values.items()}
-    return cls(**kwargs)
+    try:
+        return config_from_mapping(cls, values, str(args.config or "flags"))
+    except ValueError as e:
+        parser.error(str(e))
 
 
 def given_flags(cls: type, argv: Sequence[str] | None) -> set[str]:
@@ -171,6 +229,52 @@ def make_run_dir(
     (run / "command.txt").write_text(" ".join(cmd) + "\n")
     (run / "versions.json").write_text(json.dumps(versions(), indent=2) + "\n")
     return run
+
+
+def int_in(lo: int, hi: int):
+    """An argparse type: an integer in [lo, hi] (argparse names the flag in its refusal)."""
+
+    def parse(text: str) -> int:
+        v = int(text)
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be in [{lo}, {hi}], got {v}")
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def float_in(lo: float, hi: float):
+    """An argparse type: a number in [lo, hi] (NaN refused)."""
+
+    def parse(text: str) -> float:
+        v = float(text)
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be in [{lo}, {hi}], got {v}")
+        return v
+
+    parse.__name__ = "number"
+    return parse
+
+
+@contextlib.contextmanager
+def refusals(parser: argparse.ArgumentParser) -> Iterator[None]:
+    """Turn a refused file (missing, damaged, untrusted) into the parser's one-line error."""
+    from training.safe_files import UntrustedFileError
+
+    try:
+        yield
+    except (UntrustedFileError, FileNotFoundError) as e:
+        parser.error(str(e))
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``path`` whole or not at all (a temporary file beside it, then a rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    tmp.write_text(text)
+    tmp.replace(path)
 
 
 def progress(iterable, total: int | None = None, desc: str = "", enabled: bool = True):

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from training.common import CliParser, int_in, refusals, write_text_atomic
 from training.policy_io import available, find_snapshot, load_policy, load_state, policy_actor
 from training.rollouts import run_episodes, summarize
 
@@ -75,17 +76,23 @@ def scaffold_row(config: Path, seeds: list[int]) -> dict:
 
 def main(argv=None) -> int:
     """Evaluate every run's snapshots; print the markdown table; write the JSON."""
-    from training.policy_io import read_config
-
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="*", type=Path)
     ap.add_argument("--scaffold", type=Path, default=None, help="a config: zero-output row")
     ap.add_argument("--which", nargs="+", default=["best", "final"])
-    ap.add_argument("--episodes", type=int, default=10)
-    ap.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
+    ap.add_argument("--episodes", type=int_in(1, 100_000), default=10)
+    ap.add_argument("--seed", type=int_in(0, 2**31 - 1), default=0, help="episode i: seed + i")
     ap.add_argument("--out", type=Path, default=None, help="write the rows as JSON here")
     ap.add_argument("--curves", type=Path, default=None, help="plot the runs' eval.csv here")
     a = ap.parse_args(argv)
+    with refusals(ap):
+        return _compare(a)
+
+
+def _compare(a: argparse.Namespace) -> int:
+    """:func:`main` on parsed arguments."""
+    from training.policy_io import read_config
+
     seeds = list(range(a.seed, a.seed + a.episodes))
     rows = [scaffold_row(a.scaffold, seeds)] if a.scaffold is not None else []
     base = read_config(a.runs[0]) if a.runs else None
@@ -133,8 +140,9 @@ def main(argv=None) -> int:
         selection_curves(a.runs, labels, a.curves)
         print(f"selection curves: {a.curves}")
     if a.out is not None:
-        a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(json.dumps({"seeds": seeds, "rows": rows}, indent=1, default=float))
+        write_text_atomic(
+            a.out, json.dumps({"seeds": seeds, "rows": rows}, indent=1, default=float)
+        )
     return 0
 
 

@@ -13,7 +13,9 @@ snapshot, when the policy was warm-started from a teacher), the teacher (the mod
 controller) alone, the policy under 3x the reset noise and under a push, the Table 2 open
 loop, and the network and the teacher from rest (1x and 3x reset noise) with their
 gait-initiation figures. Writes ``evaluation.json``, ``figures/best.gif`` and Fig. 6-style
-strips of the best and the worst episode into POLICY_DIR (or ``--out``).
+strips of the best and the worst episode into ``runs/evaluate/NAME_WHICH_START`` (or
+``--out``): written into a temporary folder and renamed into place when complete, so an
+interrupted evaluation leaves the previous output or none.
 
 The policy is loaded from weights (safetensors) and plain data (TOML, JSON, npz): nothing in
 POLICY_DIR is unpickled (:mod:`training.policy_io`).
@@ -21,7 +23,6 @@ POLICY_DIR is unpickled (:mod:`training.policy_io`).
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from collections.abc import Sequence
@@ -30,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from training.common import CliParser, float_in, int_in
 from training.policy_io import SNAPSHOTS, available, load_policy, policy_actor
 from training.rollouts import (
     PUSH_HIP_DV_M_S,
@@ -39,6 +41,7 @@ from training.rollouts import (
     summarize,
     table_row,
 )
+from training.safe_files import UntrustedFileError, atomic_output
 
 GIF_MAX_FRAMES = 500
 MIN_STEPS_FROM_REST = 20
@@ -212,10 +215,10 @@ def _rows_compare(run_dir: Path, actor, cfg, seeds, out_dir: Path) -> list[dict]
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Evaluate and write the outputs."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path, help="a run directory or a committed policy")
-    ap.add_argument("--episodes", type=int, default=10)
-    ap.add_argument("--seed", type=int, default=0, help="episode i uses seed + i")
+    ap.add_argument("--episodes", type=int_in(1, 100_000), default=10)
+    ap.add_argument("--seed", type=int_in(0, 2**31 - 1), default=0, help="episode i: seed + i")
     ap.add_argument("--which", default="final", choices=sorted(SNAPSHOTS), help="snapshot")
     ap.add_argument(
         "--start",
@@ -223,15 +226,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="episode start (default: the config's; mid-stride for a policy trained on both)",
     )
-    ap.add_argument("--dt", type=float, default=None, help="control period [s] (default: config)")
+    ap.add_argument(
+        "--dt", type=float_in(1e-4, 0.1), default=None, help="control period [s] (default: config)"
+    )
     ap.add_argument("--hold", action="store_true", help="hold each action through model switches")
     ap.add_argument("--compare", action="store_true", help="also run the baselines and stresses")
-    ap.add_argument("--out", type=Path, default=None, help="output folder (default: RUN_DIR)")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output folder, replaced when complete (default: runs/evaluate/NAME_WHICH_START)",
+    )
     args = ap.parse_args(argv)
-    if args.episodes < 1:
-        ap.error("--episodes must be >= 1")
-    if not (args.run_dir / "config.toml").is_file():
-        ap.error(f"{args.run_dir} is not a run directory (no config.toml)")
+    if args.out is not None and (args.out / "config.toml").exists():
+        ap.error(f"--out {args.out} is a run or policy directory; give a folder of its own")
     t0 = time.time()
     print(f"loading {args.run_dir} ({args.which}) and the simulator", flush=True)
     import torch
@@ -239,7 +247,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     torch.set_num_threads(1)
     try:
         policy, norm, cfg, state = load_policy(args.run_dir, args.which)
-    except FileNotFoundError as e:
+    except (FileNotFoundError, UntrustedFileError) as e:
         ap.error(str(e))
     import biped_constraint_env  # noqa: F401  (compiles on a machine's first run)
 
@@ -249,13 +257,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg = replace(cfg, dt=args.dt)
     if args.hold:
         cfg = replace(cfg, hold_torques=True)
+    out = (
+        args.out
+        or Path("runs") / "evaluate" / f"{args.run_dir.resolve().name}_{args.which}_{start}"
+    )
+    try:
+        with atomic_output(out) as tmp:
+            _evaluate(args, policy, norm, cfg, state, start, tmp, t0, out)
+    except UntrustedFileError as e:
+        ap.error(str(e))
+    print(f"wrote {out}")
+    return 0
 
+
+def _evaluate(args, policy, norm, cfg, state, start, out_dir, t0, shown=None) -> None:
+    """Run the rows and write the outputs into ``out_dir`` (a fresh temporary directory)."""
     print(
         f"loaded in {time.time() - t0:.0f} s ({state.get('num_timesteps', 0)} PPO env steps); "
         f"{args.episodes} episodes of up to 30 s each; in the loop: {cfg.in_the_loop()}",
         flush=True,
     )
-    out_dir = args.out or args.run_dir
     (out_dir / "figures").mkdir(parents=True, exist_ok=True)
     seeds = list(range(args.seed, args.seed + args.episodes))
     actor = policy_actor(policy, norm, cfg)
@@ -318,10 +339,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.compare:
         names.append("rest_start_teacher.png")
     print(
-        f"\nfigures: {out_dir / 'figures'} ({', '.join(names)}); "
-        f"summary: {out_dir / 'evaluation.json'}; {time.time() - t0:.0f} s"
+        f"\nfigures: {shown / 'figures'} ({', '.join(names)}); "
+        f"summary: {shown / 'evaluation.json'}; {time.time() - t0:.0f} s"
     )
-    return 0
 
 
 if __name__ == "__main__":

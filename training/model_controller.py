@@ -351,6 +351,11 @@ TEACHER = "model:teacher_robust+start_rest"
 """The teacher: the noise-robust gait and its start phase from rest (docs/walking.md)."""
 
 
+def shipped_controllers() -> list[str]:
+    """The names of the shipped gain sets (``"model:NAME"``)."""
+    return sorted(p.stem for p in CONTROLLERS_DIR.glob("*.json"))
+
+
 def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelController:
     """The controller of a config string.
 

@@ -7,7 +7,8 @@ A *snapshot* is a directory:
 | ``policy.safetensors`` | the actor-critic's weights (in-network normaliser too) | safetensors |
 | ``normalizer.npz`` | VecNormalize's statistics and settings | npz, ``allow_pickle=False`` |
 | ``optimizer.safetensors`` | Adam's state (checkpoints only, for resuming) | safetensors |
-| ``state.json`` | env steps, best score, phase, ... (written last: it marks completion) | JSON |
+| ``state.json`` | env steps, best score, phase, ... | JSON |
+| ``manifest.json`` | every file's size and SHA-256 (written last: it marks completion) | JSON |
 
 The network's architecture comes from the run's ``config.toml`` (plain TOML), so nothing in a
 policy directory is code: a downloaded policy cannot run anything when it is loaded.
@@ -32,6 +33,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from training.safe_files import (
+    UntrustedFileError,
+    inside,
+    read_json_object,
+    read_npz,
+    read_toml,
+    safetensors_shapes,
+    verify_manifest,
+    write_manifest,
+)
 
 POLICY_FILE = "policy.safetensors"
 NORMALIZER_FILE = "normalizer.npz"
@@ -78,6 +90,7 @@ def atomic_dir(where: Path) -> Iterator[Path]:
     for f in tmp.iterdir():
         with open(f, "rb") as fh:
             os.fsync(fh.fileno())
+    write_manifest(tmp)  # last: sizes and hashes of every file
     _fsync_dir(tmp)
     if where.exists():
         shutil.rmtree(prev, ignore_errors=True)
@@ -87,8 +100,8 @@ def atomic_dir(where: Path) -> Iterator[Path]:
 
 
 def is_complete(where: Path) -> bool:
-    """Whether ``where`` is a complete snapshot (its state file, written last, is there)."""
-    return (Path(where) / STATE_FILE).is_file()
+    """Whether ``where`` is a complete, intact snapshot (every file as its manifest records)."""
+    return verify_manifest(where) is None
 
 
 def find_snapshot(run: Path, which: str) -> Path:
@@ -100,13 +113,19 @@ def find_snapshot(run: Path, which: str) -> Path:
     if which not in SNAPSHOTS:
         raise ValueError(f"which must be one of {sorted(SNAPSHOTS)}, got {which!r}")
     where = Path(run) / SNAPSHOTS[which]
-    for cand in (where, where.with_name(where.name + PREVIOUS_SUFFIX)):
-        if is_complete(cand):
-            return cand
+    prev = where.with_name(where.name + PREVIOUS_SUFFIX)
+    problem = verify_manifest(where)
+    if problem is None:
+        return where
+    if verify_manifest(prev) is None:
+        if problem != "missing":
+            print(f"{where} is damaged ({problem}); using {prev.name}", file=sys.stderr)
+        return prev
     have = [k for k in SNAPSHOTS if available(run, k)]
     legacy = " It holds an SB3 model.zip: see import_sb3_zip." if _has_sb3_zip(run) else ""
+    why = "" if problem == "missing" else f" ({problem})"
     raise FileNotFoundError(
-        f"{run} has no complete {which!r} snapshot; it has: {have or 'none'}.{legacy}"
+        f"{run} has no complete {which!r} snapshot{why}; it has: {have or 'none'}.{legacy}"
     )
 
 
@@ -149,17 +168,69 @@ def save_snapshot(
 
 
 def load_state(where: Path) -> dict[str, Any]:
-    """The snapshot's ``state.json``."""
-    return json.loads((Path(where) / STATE_FILE).read_text())
+    """The snapshot's ``state.json``, its counters checked (``num_timesteps``: an int >= 0)."""
+    path = Path(where) / STATE_FILE
+    state = read_json_object(path)
+    n = state.get("num_timesteps", 0)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise UntrustedFileError(f"{path}: num_timesteps must be an integer >= 0, got {n!r}")
+    for key in ("best", "score"):
+        if key in state and not isinstance(state[key], int | float):
+            raise UntrustedFileError(f"{path}: {key} must be a number, got {state[key]!r}")
+    return state
 
 
 def load_weights(policy, where: Path) -> None:
-    """Load the snapshot's weights into ``policy`` (every tensor must match: strict)."""
+    """Load the snapshot's weights into ``policy``: the same names and shapes, all finite."""
+    import torch
     from safetensors.torch import load_model
 
-    missing, unexpected = load_model(policy, str(Path(where) / POLICY_FILE), strict=True)
-    if missing or unexpected:  # strict raises first; kept for clarity
-        raise ValueError(f"weights do not match the policy: {missing} {unexpected}")
+    path = Path(where) / POLICY_FILE
+    shapes = safetensors_shapes(path)
+    want = {k: tuple(v.shape) for k, v in policy.state_dict().items()}
+    wrong = sorted(set(shapes) - set(want)) + [
+        f"{k}: {shapes[k]}, the config's {want[k]}" for k in shapes if k in want
+        and shapes[k] != want[k]
+    ]  # fmt: skip
+    if wrong:
+        raise UntrustedFileError(f"{path}: does not match the config's network ({wrong[:3]})")
+    try:  # names the file lacks must be aliases of shared tensors: strict load checks that
+        load_model(policy, str(path), strict=True)
+    except RuntimeError as e:
+        raise UntrustedFileError(f"{path}: does not match the config's network ({e})") from None
+    bad = [k for k, v in policy.state_dict().items() if v.is_floating_point()
+           and not torch.isfinite(v).all()]  # fmt: skip
+    if bad:
+        raise UntrustedFileError(f"{path}: {bad[0]} holds NaN or inf")
+
+
+def check_weights(cfg, where: Path) -> None:
+    """Check the snapshot's weights against the config before any network is built.
+
+    From the safetensors header alone: the hidden layers equal ``cfg.net_arch``, the input
+    is the env's observation and the output its five actions. A config that asks for a
+    larger network than its weights hold is refused here, not allocated.
+    """
+    path = Path(where) / POLICY_FILE
+    shapes = safetensors_shapes(path)
+    prefix = "features_extractor." if cfg.teacher else ""
+    for net in ("policy_net", "value_net"):
+        layers = []
+        i = 0
+        while f"mlp_extractor.{net}.{i}.weight" in shapes:
+            layers.append(shapes[f"mlp_extractor.{net}.{i}.weight"])
+            i += 2  # Linear, activation, Linear, ...
+        arch = tuple(w[0] for w in layers)
+        ins = tuple(w[1] for w in layers[:1])
+        if arch != tuple(cfg.net_arch) or ins != (cfg.obs_dim(),):
+            raise UntrustedFileError(
+                f"{path}: {net} has layers {arch} on {ins or '?'} inputs; the config says "
+                f"net_arch {list(cfg.net_arch)} on {cfg.obs_dim()} observations"
+            )
+    if shapes.get("action_net.weight", (0,))[0] != 5:
+        raise UntrustedFileError(f"{path}: no action_net of the env's 5 actions")
+    if prefix and f"{prefix}mean" not in shapes:
+        raise UntrustedFileError(f"{path}: no in-network normaliser ({prefix}mean)")
 
 
 def load_optimizer(policy, where: Path) -> None:
@@ -167,6 +238,7 @@ def load_optimizer(policy, where: Path) -> None:
     from safetensors import safe_open
 
     path = Path(where) / OPTIMIZER_FILE
+    safetensors_shapes(path)  # header and size checked before any tensor is read
     with safe_open(str(path), framework="pt") as fh:
         meta = fh.metadata()
         tensors = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 (safe_open API)
@@ -223,18 +295,37 @@ def save_normalizer(vecnorm, path: Path) -> None:
     )
 
 
-def read_normalizer(path: Path) -> dict[str, Any]:
-    """The npz written by :func:`save_normalizer` (never unpickles: ``allow_pickle=False``)."""
-    with np.load(path, allow_pickle=False) as z:
-        out = {k: z[k].copy() for k in _NORM_ARRAYS}
-        out.update({k: z[k].item() for k in _NORM_SETTINGS})
+def read_normalizer(path: Path, obs_dim: int | None = None) -> dict[str, Any]:
+    """The npz written by :func:`save_normalizer`, each array's header checked first.
+
+    ``obs_dim``: the observation statistics must have that length (or none, when the run
+    did not normalise observations). Never unpickles.
+    """
+    d = None if obs_dim is None else obs_dim
+    spec = {k: ((None,), "f") for k in ("obs_mean", "obs_var")}
+    spec.update({k: ((), "f") for k in ("obs_count", "ret_mean", "ret_var", "ret_count")})
+    spec.update({k: ((), "f") for k in _NORM_SETTINGS})
+    z = read_npz(path, spec, max_bytes=1 << 20)
+    out = {k: z[k] for k in _NORM_ARRAYS}
+    out.update({k: float(z[k]) for k in _NORM_SETTINGS})
     out["norm_obs"], out["norm_reward"] = bool(out["norm_obs"]), bool(out["norm_reward"])
+    n = len(out["obs_mean"])
+    if out["norm_obs"] and (n != len(out["obs_var"]) or (d is not None and n != d)):
+        raise UntrustedFileError(
+            f"{path}: observation statistics of length {n}/{len(out['obs_var'])}, the config's "
+            f"observation has {d}"
+        )
+    if out["norm_obs"] and (np.any(out["obs_var"] < 0) or out["epsilon"] <= 0):
+        raise UntrustedFileError(f"{path}: a negative variance or epsilon <= 0")
+    if out["norm_obs"] and out["clip_obs"] <= 0:
+        raise UntrustedFileError(f"{path}: clip_obs must be > 0")
     return out
 
 
 def restore_normalizer(vecnorm, where: Path) -> None:
     """Set a new VecNormalize's statistics from a snapshot (to continue training)."""
-    d = read_normalizer(Path(where) / NORMALIZER_FILE)
+    n = vecnorm.observation_space.shape[0]
+    d = read_normalizer(Path(where) / NORMALIZER_FILE, n)
     if d["norm_obs"] != vecnorm.norm_obs:
         raise ValueError(f"{where}: norm_obs {d['norm_obs']} differs from the run's")
     if d["norm_obs"]:
@@ -287,26 +378,55 @@ def build_policy(cfg, observation_space=None):
 
 
 def read_config(run: Path):
-    """The :class:`training.ppo_config.PPOConfig` of a run directory (its config.toml)."""
-    from training.common import parse_config
+    """The :class:`training.ppo_config.PPOConfig` of a run directory (its config.toml).
+
+    The file is data from anywhere: read bounded, every key known, every value checked
+    (:meth:`PPOConfig.check_untrusted`: the registered env id, the package's own controller
+    and reference names, no path).
+    """
+    from training.common import config_from_mapping
     from training.ppo_config import PPOConfig
 
-    path = Path(run) / "config.toml"
-    if not path.is_file():
+    run = Path(run)
+    path = run / "config.toml"
+    if not run.is_dir():
+        raise FileNotFoundError(f"{run}: no such directory")
+    if not path.exists() and not path.is_symlink():
         raise FileNotFoundError(f"{run} is not a run directory (no config.toml)")
-    return parse_config(PPOConfig, ["--config", str(path)], "")
+    data = read_toml(path, run)
+    data.pop("out_dir", None)  # where it was written: never used from a loaded config
+    try:
+        cfg = config_from_mapping(PPOConfig, data, str(path))
+        cfg.check_untrusted()
+    except ValueError as e:
+        raise UntrustedFileError(f"{path}: {e}") from None
+    return cfg
 
 
 def load_policy(run: Path, which: str = "final"):
-    """(policy, obs normaliser, config, snapshot state) of a run's snapshot, without pickle."""
+    """(policy, obs normaliser, config, snapshot state) of a run's snapshot.
+
+    Reads only files inside ``run``; checks before it builds (:func:`check_weights`); needs
+    the normaliser when the run normalised observations. Nothing is unpickled or imported.
+    """
     cfg = read_config(run)
     where = find_snapshot(run, which)
+    inside(Path(run), where)
+    state = load_state(where)
+    check_weights(cfg, where)
     policy = build_policy(cfg)
     load_weights(policy, where)
     policy.set_training_mode(False)
     norm_path = where / NORMALIZER_FILE
-    norm = ObsNormalizer(read_normalizer(norm_path) if norm_path.is_file() else None)
-    return policy, norm, cfg, load_state(where)
+    if cfg.teacher:  # the network normalises its own input; VecNormalize kept returns only
+        d = read_normalizer(norm_path, cfg.obs_dim()) if norm_path.exists() else None
+        norm = ObsNormalizer(d if d and d["norm_obs"] else None)
+    else:
+        d = read_normalizer(norm_path, cfg.obs_dim())
+        if not d["norm_obs"]:
+            raise UntrustedFileError(f"{norm_path}: holds no observation statistics")
+        norm = ObsNormalizer(d)
+    return policy, norm, cfg, state
 
 
 def policy_actor(policy, normalizer: ObsNormalizer, cfg):
@@ -334,12 +454,21 @@ def policy_batch_actor(policy, normalizer: ObsNormalizer, cfg):
 def import_sb3_zip(
     zip_path: Path, vecnormalize_pkl: Path | None, out: Path, state: dict | None = None
 ) -> None:
-    """Convert a Stable-Baselines3 ``model.zip`` (+ ``vecnormalize.pkl``) to a snapshot.
+    """Convert a Stable-Baselines3 ``model.zip`` (+ ``vecnormalize.pkl``) to a run directory.
 
-    This loads the SB3 files, which unpickles them: it prints :data:`SB3_PICKLE_WARNING`
-    first. Use it only on files you trust; the snapshot it writes loads without pickle.
+    ``out`` receives ``config.toml`` (the network's architecture, read from the model, and
+    the observation it takes) and the snapshot ``final/``, so that
+    ``python -m training.evaluate OUT`` runs it. The model's actions in [-1, 1] are taken as
+    torques / 150 N m (``make_sb3_vec_env``'s mapping). This loads the SB3 files, which
+    unpickles them: it prints :data:`SB3_PICKLE_WARNING` first. Use it only on files you
+    trust; the directory it writes loads without pickle.
     """
+    from dataclasses import replace
+
     from stable_baselines3 import PPO
+
+    from training.common import to_toml
+    from training.ppo_config import ACTIVATIONS, PPOConfig, activation_fn
 
     print(SB3_PICKLE_WARNING.format(path=zip_path), file=sys.stderr, flush=True)
     model = PPO.load(zip_path, device="cpu")
@@ -351,9 +480,29 @@ def import_sb3_zip(
 
         print(SB3_PICKLE_WARNING.format(path=vecnormalize_pkl), file=sys.stderr, flush=True)
         vecnorm = VecNormalize.load(str(vecnormalize_pkl), make_sb3_vec_env(1, 0, {}, "dummy"))
+    pol = model.policy
+    arch = pol.net_arch["pi"] if isinstance(pol.net_arch, dict) else pol.net_arch
+    act = [a for a in ACTIVATIONS if activation_fn(a) is pol.activation_fn]
+    n_obs = pol.observation_space.shape[0]
+    dims = {PPOConfig(phase_obs=p, reference_obs=r).obs_dim(): (p, r) for p in (0, 1)
+            for r in (0, 1)}  # fmt: skip
+    if not act or n_obs not in dims or pol.action_space.shape != (5,):
+        raise ValueError(f"{zip_path}: not a ConstrainedBiped-v0 MlpPolicy of this package's kind")
+    if vecnorm is None or not vecnorm.norm_obs:
+        raise ValueError(f"{zip_path}: give its --vecnormalize (observation statistics)")
+    phase, ref = dims[n_obs]
+    cfg = replace(
+        PPOConfig(), net_arch=tuple(arch), activation=act[0], phase_obs=bool(phase),
+        reference_obs=bool(ref), use_sde=bool(model.use_sde),
+        total_timesteps=int(model.num_timesteps),
+    )  # fmt: skip
+    cfg.validate()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
     save_snapshot(
-        out, model.policy, {"num_timesteps": int(model.num_timesteps), **(state or {})}, vecnorm
+        out / "final", pol, {"num_timesteps": int(model.num_timesteps), **(state or {})}, vecnorm
     )
+    (out / "config.toml").write_text(to_toml(cfg))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -362,10 +511,10 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(description="Convert an SB3 model.zip to a pickle-free snapshot")
     sub = ap.add_subparsers(dest="cmd", required=True)
-    imp = sub.add_parser("import-sb3", help="model.zip (+ vecnormalize.pkl) -> snapshot dir")
+    imp = sub.add_parser("import-sb3", help="model.zip + vecnormalize.pkl -> a run directory")
     imp.add_argument("model_zip", type=Path)
-    imp.add_argument("--vecnormalize", type=Path, default=None)
-    imp.add_argument("--out", type=Path, required=True, help="snapshot directory to write")
+    imp.add_argument("--vecnormalize", type=Path, required=True, help="its VecNormalize pickle")
+    imp.add_argument("--out", type=Path, required=True, help="run directory to write")
     a = ap.parse_args(argv)
     import_sb3_zip(a.model_zip, a.vecnormalize, a.out)
     print(f"wrote {a.out}")

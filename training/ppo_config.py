@@ -102,6 +102,56 @@ class PPOConfig:
     resume: str = ""  # a run directory to continue (to its own saved total)
     progress: bool = True  # progress bars
 
+    def validate(self) -> None:
+        """Refuse a value out of its range or choices (ValueError naming the flag)."""
+        for name, lo, hi in _RANGES:
+            v = getattr(self, name)
+            vals = v if isinstance(v, tuple) else (v,)
+            for x in vals:
+                if not lo <= x <= hi:
+                    raise ValueError(f"--{_flag(name)} must be in [{lo}, {hi}], got {v!r}")
+        for name, allowed in _choices().items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(
+                    f"--{_flag(name)} must be one of {sorted(allowed)}, got {getattr(self, name)!r}"
+                )
+        for name, sizes in (
+            ("gear", (1, 5)),
+            ("pd_pose", (0, 5)),
+            ("pd_offset", (0, 5)),
+            ("log_std_joints", (0, 5)),
+            ("net_arch", tuple(range(1, 9))),
+        ):
+            if len(getattr(self, name)) not in sizes:
+                raise ValueError(f"--{_flag(name)} takes {' or '.join(map(str, sizes))} values")
+        if self.batch_size > self.n_steps * self.n_envs:
+            raise ValueError("--batch-size must be at most --n-steps x --n-envs")  # fmt: skip
+
+    def check_untrusted(self) -> None:
+        """Refuse what a config from anywhere must not name (a loaded run's config.toml).
+
+        The env id must be the registered one (Gymnasium imports the module of a
+        ``"module:Id"`` id); controllers, teachers and references must be the package's own
+        names, not paths; a saved config resumes nothing else.
+        """
+        from training.model_controller import shipped_controllers
+
+        self.validate()
+        for name in ("teacher", "base_controller"):
+            spec = getattr(self, name)
+            if not spec or spec == "model":
+                continue
+            kind, _, names = spec.partition(":")
+            parts = names.split("+") if names else []
+            known = shipped_controllers()
+            if kind != "model" or not parts or any(p not in known for p in parts):
+                raise ValueError(
+                    f"{name} must be '', 'model' or 'model:NAME[+NAME]' with shipped names "
+                    f"{known}, got {spec!r}"
+                )
+        if self.resume:
+            raise ValueError(f"resume must be empty in a saved config, got {self.resume!r}")
+
     def env_kwargs(self) -> dict:
         """Keyword arguments of the env."""
         return {
@@ -214,6 +264,52 @@ class PPOConfig:
 
 
 ACTIVATIONS = ("tanh", "relu", "elu")
+
+_BIG = 10**12
+_RANGES = (  # (field, min, max): every number a config or flag may set
+    ("dt", 0.0, 0.1), ("rsi", 0.0, 1.0), ("pd_range", 0.0, 3.2), ("pd_gain_scale", 0.0, 100.0),
+    ("pd_pose", -3.2, 3.2), ("pd_offset", -3.2, 3.2), ("train_episode_s", 0.0, 1e4),
+    ("seed", 0, 2**31 - 1), ("total_timesteps", 0, _BIG), ("n_envs", 1, 4096),
+    ("env_threads", 1, 256), ("n_steps", 1, 1 << 20), ("batch_size", 1, 1 << 24),
+    ("n_epochs", 1, 1000), ("learning_rate", 0.0, 1.0), ("target_kl", 0.0, 10.0),
+    ("gamma", 0.0, 1.0), ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, 10.0),
+    ("ent_coef", -1.0, 10.0), ("log_std_init", -20.0, 5.0), ("sde_sample_freq", -1, _BIG),
+    ("net_arch", 1, 4096), ("torch_threads", 1, 256), ("update_threads", 0, 256),
+    ("eval_freq", 1, _BIG), ("eval_episodes", 1, 100_000), ("checkpoint_freq", 1, _BIG),
+    ("reset_noise_scale", 0.0, 1.0), ("fall_hip_height_m", 0.0, 10.0),
+    ("forward_reward_weight", -1e6, 1e6), ("alive_bonus", -1e6, 1e6),
+    ("switch_bonus", -1e6, 1e6), ("step_bonus", -1e6, 1e6), ("ctrl_cost_weight", -1e6, 1e6),
+    ("gear", 1e-6, 1e4), ("bc_episodes0", 0, 1_000_000), ("bc_noise_nm", 0.0, 150.0),
+    ("bc_rounds", 0, 10_000), ("bc_episodes", 0, 1_000_000), ("bc_periods0", 1, 1_000_000),
+    ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
+    ("bc_ankle_weight", 0.0, 1e6), ("log_std_joints", -20.0, 5.0), ("action_std_nm", 0.0, 150.0),
+    ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
+)  # fmt: skip
+
+
+def _flag(name: str) -> str:
+    return name.replace("_", "-")
+
+
+def _choices() -> dict[str, tuple]:
+    from biped_constraint_env import ENV_ID
+    from biped_constraint_env.reference import REFERENCES
+    from biped_constraint_env.tasks import PRESETS, TASKS
+
+    return {
+        "env_id": (ENV_ID,),  # the registered id only: "module:Id" would import module
+        "task": tuple(TASKS),
+        "preset": tuple(PRESETS),
+        "start": ("midstride", "rest", "mixed"),
+        "reward": ("env", "tracking"),
+        "reference": ("", *REFERENCES),
+        "action": ("torque", "pd"),
+        "pd_around": ("fixed", "reference"),
+        "vec": ("batched", "subproc", "dummy"),
+        "lr_schedule": ("constant", "linear"),
+        "select_by": ("mean", "min"),
+        "activation": ACTIVATIONS,
+    }
 
 
 def activation_fn(name: str):

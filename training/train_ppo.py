@@ -36,6 +36,7 @@ import numpy as np
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
 from training.common import given_flags, make_run_dir, parse_config, progress, to_toml
 from training.policy_io import (
+    UntrustedFileError,
     available,
     find_snapshot,
     is_complete,
@@ -48,7 +49,6 @@ from training.policy_io import (
     save_snapshot,
 )
 from training.ppo_config import (
-    ACTIVATIONS,
     DEMO_SEED_OFFSET,
     IMITATION_CHECK_SEED_OFFSET,
     SELECTION_SEED_OFFSET,
@@ -57,12 +57,18 @@ from training.ppo_config import (
     bc_weights,
 )
 from training.rollouts import run_episodes, run_episodes_batched
+from training.safe_files import RunLock, read_npz
 
 RESUME_OVERRIDES = ("total_timesteps", "progress")
 """The settings a resume may change (given as flags); every other one is the run's own."""
 IMITATION_CKPT = "checkpoints/imitation"
 """Snapshot of the imitation phase after each DAgger round (policy, data, round, RNG)."""
 PPO_CKPT = "checkpoints/latest"
+
+
+def _data_spec(cfg: PPOConfig) -> dict:
+    """The shapes of a snapshot's labelled data (observations, actions), for :func:`read_npz`."""
+    return {"obs": ((None, cfg.obs_dim()), "f"), "act": ((None, 5), "f")}
 
 
 def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
@@ -95,8 +101,8 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     where = ckpt if is_complete(ckpt) else prev if is_complete(prev) else None
     if where is not None:
         st = load_state(where)
-        with np.load(where / "data.npz", allow_pickle=False) as z:
-            data = imitation.Dataset(z["obs"], z["act"])
+        z = read_npz(where / "data.npz", _data_spec(cfg))
+        data = imitation.Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
         n = cfg.obs_dim()  # the statistics come with the weights
         model = make_model(np.zeros(n), np.ones(n))
         load_weights(model.policy, where)
@@ -360,38 +366,45 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
     return EvalAndCheckpoint()
 
 
-def _check_choices(cfg: PPOConfig) -> None:
-    """Refuse a setting outside its choices before any run directory is made."""
-    choices = (
-        ("lr_schedule", ("constant", "linear")),
-        ("select_by", ("mean", "min")),
-        ("activation", ACTIVATIONS),
-    )
-    for name, allowed in choices:
-        if getattr(cfg, name) not in allowed:
-            raise SystemExit(f"--{name.replace('_', '-')} must be one of {allowed}")
-
-
 def _resolve(argv: Sequence[str] | None) -> tuple[PPOConfig, Path]:
-    """The config and run directory: a new run, or a resumed one with its own settings."""
+    """The config and run directory: a new run, or a resumed one with its own settings.
+
+    Every refusal is one line (SystemExit) before anything is written.
+    """
     cfg = parse_config(PPOConfig, argv, __doc__.splitlines()[0])
-    _check_choices(cfg)
     if not cfg.resume:
-        return cfg, make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
+        try:
+            return cfg, make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
+        except OSError as e:
+            raise SystemExit(
+                f"error: --out-dir {cfg.out_dir}: cannot create the run ({e})"
+            ) from None
     run = Path(cfg.resume)
-    saved = read_config(run)
+    try:
+        saved = read_config(run)
+    except (FileNotFoundError, UntrustedFileError) as e:
+        raise SystemExit(f"error: --resume: {e}") from None
     given = given_flags(PPOConfig, argv) - {"resume", "config"}
     ignored = sorted(given - set(RESUME_OVERRIDES))
     if ignored:
         raise SystemExit(
-            f"--resume continues a run with its own settings; only {list(RESUME_OVERRIDES)} "
-            f"may be given, not {ignored}"
+            f"error: --resume continues a run with its own settings; only "
+            f"{list(RESUME_OVERRIDES)} may be given, not {ignored}"
         )
-    cfg = replace(
-        saved, **{k: getattr(cfg, k) for k in given}, resume=str(run), out_dir=saved.out_dir
-    )
+    cfg = replace(saved, **{k: getattr(cfg, k) for k in given}, resume=str(run))
+    if (
+        not any(available(run, k) for k in ("checkpoint", "imitation"))
+        and not is_complete(run / IMITATION_CKPT)
+        and not is_complete(run / (IMITATION_CKPT + ".prev"))
+    ):
+        raise SystemExit(
+            f"error: --resume: {run} has no complete snapshot to continue from "
+            f"({PPO_CKPT}, {IMITATION_CKPT} or imitation); start a new run instead"
+        )
     if "total_timesteps" in given:  # a new total is the run's own from now on
-        (run / "config.toml").write_text(to_toml(replace(cfg, resume="")))
+        tmp = run / "config.toml.tmp"
+        tmp.write_text(to_toml(replace(cfg, resume="")))
+        tmp.rename(run / "config.toml")
     return cfg, run
 
 
@@ -462,19 +475,32 @@ def training_env(cfg: PPOConfig, seed: int, monitor_file: Path | None = None, en
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Train (or resume) and write the run directory."""
+    """Train (or resume) and write the run directory (one writer at a time: a lock)."""
+    cfg, run = _resolve(argv)
+    try:
+        with RunLock(run):
+            return _main(cfg, run)
+    except UntrustedFileError as e:
+        raise SystemExit(f"error: {e}") from None
+
+
+def _main(cfg: PPOConfig, run: Path) -> int:
+    """:func:`main` with the run's lock held."""
     import torch
     from stable_baselines3.common.utils import set_random_seed
 
-    cfg, run = _resolve(argv)
     torch.set_num_threads(cfg.torch_threads)
     (run / "figures").mkdir(exist_ok=True)
     print(f"run directory: {run}", flush=True)
     set_random_seed(cfg.seed)
     resuming = available(run, "checkpoint")
     start = load_state(find_snapshot(run, "checkpoint"))["num_timesteps"] if resuming else 0
-    # one monitor file per session, named by the env step it starts from
-    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, run / f"{start}.monitor.csv")
+    # one monitor file per session, named by the env step it starts from (never overwritten)
+    monitor = run / f"{start}.monitor.csv"
+    k = 1
+    while monitor.exists():
+        monitor, k = run / f"{start}.{k}.monitor.csv", k + 1
+    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, monitor)
     try:
         return _train(cfg, run, venv, vecnorm, start, resuming)
     finally:
@@ -527,8 +553,8 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
     if cfg.teacher and cfg.bc_anchor_steps > 0:
         from training.imitation import Anchor, Dataset
 
-        with np.load(find_snapshot(run, "imitation") / "demos.npz", allow_pickle=False) as z:
-            demos = Dataset(z["obs"], z["act"])
+        z = read_npz(find_snapshot(run, "imitation") / "demos.npz", _data_spec(cfg))
+        demos = Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
         anchor = Anchor(
             model.policy, demos, cfg.bc_anchor_lr, weights=bc_weights(cfg), seed=cfg.seed
         )
