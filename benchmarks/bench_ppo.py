@@ -145,8 +145,9 @@ def main(argv=None) -> int:
     best: dict[str, float] = {}
     for r in range(a.rounds):
         for key, fn in rows.items():
-            best[key] = max(best.get(key, 0.0), fn())
-            print(f"round {r + 1}/{a.rounds}: {key}: {best[key]:,.0f} env-steps/s", flush=True)
+            rate = fn()
+            best[key] = max(best.get(key, 0.0), rate)
+            print(f"round {r + 1}/{a.rounds}: {key}: {rate:,.0f} env-steps/s", flush=True)
     print(
         f"{' '.join([a.config, *overrides])}: {cfg.n_envs} envs x {cfg.n_steps} steps, "
         f"minibatch {cfg.batch_size}, {cfg.n_epochs} epochs, net {list(cfg.net_arch)} "

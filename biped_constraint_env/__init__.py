@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import gymnasium
 
+from . import _first_use  # noqa: F401  (says so before a first compile)
 from .model import BipedParams, ChainModel, LinkParams, chain_for, paper_biped
 from .modes import MODE_TABLE, EventCode, Mode
 from .simulator import (

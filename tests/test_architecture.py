@@ -12,6 +12,7 @@ import pytest
 import biped_constraint_env
 
 LAYERS = [
+    "_first_use",
     "jit",
     "validation",
     "units",

@@ -153,7 +153,11 @@ def read_npz(
                         f"{tuple('any' if w is None else w for w in shape)}"
                     )
                 n_bytes = int(np.prod(got, dtype=np.int64)) * dtype.itemsize
-                if n_bytes > max_bytes or info.file_size > n_bytes + 4096:
+                if n_bytes > max_bytes:
+                    raise UntrustedFileError(
+                        f"{path}: {name} holds {n_bytes} bytes of data, more than {max_bytes}"
+                    )
+                if info.file_size > n_bytes + 4096:
                     raise UntrustedFileError(
                         f"{path}: {name} stores {info.file_size} bytes for {n_bytes} of data"
                     )

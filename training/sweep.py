@@ -18,7 +18,6 @@ results table is printed and written to ``results.csv`` in the sweep's directory
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import os
 import sys
@@ -26,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from training.common import CliParser, int_in
 from training.distributed import connect, shutdown
 
 METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
@@ -85,26 +85,33 @@ def trial(config: dict) -> None:
     os.chdir(config["cwd"])
 
     out = Path(tune.get_context().get_trial_dir())
-    argv = ["--config", config["config"], "--seed", str(config["seed"]), "--progress", "false"]
-    for key, value in config["settings"].items():
-        argv += [f"--{key.replace('_', '-')}", str(value)]
-    argv += ["--out-dir", str(out)]
+    earlier = sorted((out / "train_ppo").iterdir()) if (out / "train_ppo").is_dir() else []
+    if earlier:  # a retried trial continues its run (refused by name if nothing to resume)
+        print(f"trial: resuming {earlier[-1]}", flush=True)
+        argv = ["--resume", str(earlier[-1]), "--progress", "false"]
+    else:
+        argv = ["--config", config["config"], "--seed", str(config["seed"]), "--progress", "false"]
+        for key, value in config["settings"].items():
+            argv += [f"--{key.replace('_', '-')}", str(value)]
+        argv += ["--out-dir", str(out)]
     t0 = time.time()
     train_ppo.main(argv)
     wall = time.time() - t0
-    (run,) = (out / "train_ppo").iterdir()
+    run = earlier[-1] if earlier else next((out / "train_ppo").iterdir())
     metrics = {**evaluate_run(run, config["eval_episodes"]), "train_wall_s": wall}
     tune.report(metrics, checkpoint=tune.Checkpoint.from_directory(run))
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the sweep and print its results table."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", type=Path, required=True, help="train_ppo TOML config")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="one trial per seed")
+    ap.add_argument(
+        "--seeds", type=int_in(0, 2**31 - 1), nargs="+", default=[0], help="one trial per seed"
+    )
     ap.add_argument("--grid", nargs="*", default=[], help="key=v1,v2: one trial per value")
     ap.add_argument("--set", nargs="*", default=[], dest="settings", help="key=value, all trials")
-    ap.add_argument("--eval-episodes", type=int, default=10)
+    ap.add_argument("--eval-episodes", type=int_in(1, 100_000), default=10)
     ap.add_argument("--ray-address", default="", help="HOST:PORT of a Ray cluster (else local)")
     ap.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray instance")
     ap.add_argument("--name", default="", help="sweep name (default: the config's stem)")
@@ -144,6 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         tuner = tune.Tuner(
             tune.with_resources(trial, {"cpu": 1}),
             param_space=space,
+            # trial folders named by their id: the default name lists the settings, with commas
+            tune_config=tune.TuneConfig(trial_dirname_creator=lambda t: f"trial_{t.trial_id}"),
             run_config=tune.RunConfig(name="tune", storage_path=str(storage), verbose=1),
         )
         results = tuner.fit()

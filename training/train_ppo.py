@@ -126,11 +126,19 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
         data = demo.data
         model = make_model(*imitation.obs_statistics(data.obs))
         k0, rows = 0, []
+    t_session = time.time()
     for k in range(k0, cfg.bc_rounds + 1):
         full = k in (0, cfg.bc_rounds)
         steps = cfg.bc_grad_steps if full else cfg.bc_grad_steps // 3
         epochs = max(1, round(steps * 512 / len(data)))
-        print(f"imitation round {k}: fitting {len(data)} samples, {epochs} epochs", flush=True)
+        done = k - k0  # rounds of this session: their mean time gives the ETA
+        per_round = (time.time() - t_session) / max(done, 1)
+        eta = f", about {per_round * (cfg.bc_rounds + 1 - k):.0f} s to go" if done else ""
+        print(
+            f"imitation round {k} of {cfg.bc_rounds}: fitting {len(data)} samples, {epochs} "
+            f"epochs{eta}",
+            flush=True,
+        )
         mse = imitation.fit(
             model.policy,
             data,
@@ -160,7 +168,8 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
             }
         )
         print(
-            f"imitation round {k}: mse {mse:.2e}, student steps {check} ({time.time() - t0:.0f} s)",
+            f"imitation round {k} of {cfg.bc_rounds}: mse {mse:.2e}, student steps {check} "
+            f"({time.time() - t0:.0f} s)",
             flush=True,
         )
         if k == cfg.bc_rounds:
@@ -235,6 +244,32 @@ def _critic_warmup(cfg: PPOConfig, anchor=None):
     return CriticWarmup()
 
 
+def _progress_bar(cfg: PPOConfig):
+    """A bar over the run's whole total: a resumed run starts where it stopped, ETA included."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    class RunProgress(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(
+                total=cfg.total_timesteps,
+                initial=self.model.num_timesteps,
+                desc="PPO",
+                unit=" env steps",
+                unit_scale=True,
+                mininterval=1.0,
+            )
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.model.num_timesteps - self.bar.n)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return RunProgress()
+
+
 def update_threads(rollout_threads: int, update_threads: int):
     """A callback: torch on ``update_threads`` threads in PPO's updates, else ``rollout_threads``.
 
@@ -257,7 +292,7 @@ def update_threads(rollout_threads: int, update_threads: int):
     return UpdateThreads()
 
 
-def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
+def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0.0):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class EvalAndCheckpoint(BaseCallback):
@@ -275,7 +310,7 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
             self.next_eval = cfg.eval_freq
             self.next_ckpt = cfg.checkpoint_freq
             self.best = best
-            self.t0 = time.time()
+            self.t0 = time.time() - wall0  # wall_s counts over every session of the run
             self.csv = run / "eval.csv"
 
         def _on_training_start(self) -> None:
@@ -301,7 +336,12 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float):
             save_snapshot(
                 run / PPO_CKPT,
                 self.model.policy,
-                {"phase": "ppo", "num_timesteps": self.model.num_timesteps, "best": self.best},
+                {
+                    "phase": "ppo",
+                    "num_timesteps": self.model.num_timesteps,
+                    "best": self.best,
+                    "wall_s": time.time() - self.t0,
+                },
                 vecnorm,
                 optimizer=True,
             )
@@ -560,7 +600,8 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
         )
     remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
     t0 = time.time()
-    callback = _callbacks(cfg, run, vecnorm, best)
+    wall0 = load_state(find_snapshot(run, "checkpoint")).get("wall_s", 0.0) if resuming else 0.0
+    callback = _callbacks(cfg, run, vecnorm, best, float(wall0))
     if remaining > 0:
         print(f"PPO: {remaining} env steps to go", flush=True)
         model.learn(
@@ -569,8 +610,8 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
                 callback,
                 _critic_warmup(cfg, anchor),
                 update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
+                *([_progress_bar(cfg)] if cfg.progress else []),
             ],
-            progress_bar=cfg.progress,
             reset_num_timesteps=start == 0,
         )
         callback.checkpoint()
