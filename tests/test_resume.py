@@ -134,3 +134,33 @@ def test_random_kills_always_leave_a_resumable_run(tmp_path):
         assert after >= before
     assert train_ppo.main(["--resume", str(run), "--progress", "false"]) == 0
     assert load_state(run / "final")["num_timesteps"] >= total
+
+
+def test_interrupted_run_resumes_and_a_second_writer_is_refused(tmp_path):
+    """Ctrl-C in PPO leaves a resumable run; while one resume runs, a second is refused by
+    name (the holder's pid); once the holder is killed, the lock is free again."""
+    total = 8192
+    args = SMALL + ["--total-timesteps", str(total), "--checkpoint-freq", "512"]
+    proc = _start(tmp_path, args + ["--eval-freq", "100000"])
+    out = tmp_path / "train_ppo"
+    t0 = time.time()
+    while not any(out.glob("*/checkpoints/latest/" + STATE_FILE)):
+        assert proc.poll() is None and time.time() - t0 < WAIT_S
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    proc.wait()
+    proc.stderr.close()
+    run = _run_dir(tmp_path)
+    holder = _start(tmp_path, ["--resume", str(run), "--progress", "false"])
+    lock = run / ".lock"
+    t0 = time.time()
+    while not (lock.exists() and f"pid {holder.pid}" in lock.read_text()):
+        assert holder.poll() is None and time.time() - t0 < WAIT_S
+        time.sleep(0.05)
+    with pytest.raises(SystemExit, match=f"in use by pid {holder.pid}"):
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    holder.send_signal(signal.SIGKILL)
+    holder.wait()
+    holder.stderr.close()
+    assert train_ppo.main(["--resume", str(run), "--progress", "false"]) == 0
+    assert load_state(run / "final")["num_timesteps"] >= total

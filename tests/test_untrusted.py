@@ -434,3 +434,11 @@ def test_an_imported_sb3_model_is_a_run_directory_that_evaluates(tmp_path, capsy
     assert (out / "config.toml").is_file() and (out / "final" / "manifest.json").is_file()
     assert evaluate.main([str(out), "--episodes", "1", "--out", str(tmp_path / "ev")]) == 0
     assert (tmp_path / "ev" / "evaluation.json").is_file()
+
+
+def test_resume_of_a_crafted_run_imports_nothing(policy, tmp_path):
+    (policy / "payload.py").write_text('open("PWNED", "w").write("ran")\n')
+    _config(policy, env_id='"policies.evil.payload:ConstrainedBiped-v0"')
+    with pytest.raises(SystemExit, match="env-id must be one of"):
+        train_ppo.main(["--resume", str(policy)])
+    assert not (tmp_path / "PWNED").exists() and not (policy / ".lock").exists()

@@ -424,7 +424,7 @@ def _resolve(argv: Sequence[str] | None) -> tuple[PPOConfig, Path]:
         saved = read_config(run)
     except (FileNotFoundError, UntrustedFileError) as e:
         raise SystemExit(f"error: --resume: {e}") from None
-    given = given_flags(PPOConfig, argv) - {"resume", "config"}
+    given = given_flags(PPOConfig, argv) - {"resume", "config", "out_dir"}  # out_dir: the run's
     ignored = sorted(given - set(RESUME_OVERRIDES))
     if ignored:
         raise SystemExit(
@@ -522,6 +522,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _main(cfg, run)
     except UntrustedFileError as e:
         raise SystemExit(f"error: {e}") from None
+    except KeyboardInterrupt:
+        print(f"\ninterrupted; continue with: python -m training.train_ppo --resume {run}")
+        return 130
 
 
 def _main(cfg: PPOConfig, run: Path) -> int:
