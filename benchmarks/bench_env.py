@@ -1,6 +1,6 @@
 """Environment speed, side by side with Gymnasium's Walker2d-v5 (MuJoCo), in one run.
 
-    python -m benchmarks.bench_env
+    python -m benchmarks.bench_env [--pd-only]
 
 Both envs are driven the same way: ``gym.make`` (default wrappers), a fixed sequence of
 seeded random actions scaled to 5% of the action bound, reset on termination/truncation
@@ -16,6 +16,11 @@ ground), so those rows time a reset and one terminated period per episode. The "
 replay the actions the model controller (``model:teacher_robust``) gave,
 recorded before the timing from the same seeds: the env walks the same way again (the simulator
 is deterministic) and no reset is timed. They time ``env.step`` as it is used.
+
+Last, the cost per simulated second of PD targets with the PD law at the physics rate
+(targets held over a 20 ms period, the law every 5 ms or 1 ms) against torque actions on the
+same trajectories (the held PD law's torques, replayed as torque actions: the same motion),
+from rest at the rest pose until the swing foot lands (``--pd-only``: these rows alone).
 """
 
 from __future__ import annotations
@@ -124,6 +129,80 @@ def vec_steps_per_s(
     return n * num_envs / dt
 
 
+PD_EPISODES = 200
+"""Episodes of the PD-cost timing (each a held rest pose until the swing foot lands, ~0.5 s)."""
+
+
+def pd_episodes(dt: float, pd_dt: float, seeds) -> list[np.ndarray]:
+    """Each seed's episode of PD targets at the rest pose (zero action), from rest, as the
+    torques the PD law applied in each period (``info["torque"]``)."""
+    env = gym.make("ConstrainedBiped-v0", action="pd", dt=dt, pd_dt=pd_dt, start="rest")
+    out = []
+    for seed in seeds:
+        env.reset(seed=seed)
+        taus, done = [], False
+        while not done:
+            _, _, te, tr, info = env.step(np.zeros(5))
+            taus.append(info["torque"])
+            done = te or tr
+        out.append(np.array(taus))
+    return out
+
+
+def us_per_sim_second(seeds, dt: float, actions=None, **kwargs) -> float:
+    """Wall time [us] per simulated second over the seeds' episodes from rest: PD targets at
+    the rest pose (``actions`` None) or a replay of recorded torques, one list per seed."""
+    env = gym.make("ConstrainedBiped-v0", dt=dt, start="rest", **kwargs)
+    wall = sim = 0.0
+    for k, seed in enumerate(seeds):
+        env.reset(seed=seed)
+        acts = actions[k] if actions is not None else np.zeros((10**6, 5))
+        t0 = time.perf_counter()
+        for a in acts:
+            _, _, te, tr, info = env.step(a)
+            if te or tr:
+                break
+        wall += time.perf_counter() - t0
+        sim += info["t"]
+    return wall / sim * 1e6
+
+
+def pd_cost(rounds: int) -> None:
+    """Print the cost per simulated second of PD targets with the law at the physics rate
+    against torque actions (the same trajectories: the held law's torques replayed)."""
+    seeds = range(PD_EPISODES)
+    held20 = pd_episodes(0.02, 0.02, seeds)
+    held5 = pd_episodes(0.005, 0.005, seeds)
+    rows = {
+        "torques, 20 ms periods (the held PD law's, replayed)": lambda: us_per_sim_second(
+            seeds, 0.02, held20
+        ),
+        "torques, 5 ms periods (the walking task's; replayed)": lambda: us_per_sim_second(
+            seeds, 0.005, held5
+        ),
+        "PD targets held 20 ms, the PD law every 5 ms": lambda: us_per_sim_second(
+            seeds, 0.02, action="pd", pd_dt=0.005
+        ),
+        "PD targets held 20 ms, the PD law every 1 ms": lambda: us_per_sim_second(
+            seeds, 0.02, action="pd", pd_dt=0.001
+        ),
+    }
+    best = {label: np.inf for label in rows}
+    for _ in range(rounds):
+        for label, fn in rows.items():
+            best[label] = min(best[label], fn())
+    t20, t5, pd5, pd1 = best.values()
+    print(f"\nPD at the physics rate against torques, us per simulated second (best of {rounds}):")
+    for label, v in best.items():
+        print(f"  {label}: {v:,.0f}")
+    for name, v, ref in (("20 ms torques", pd5, t20), ("5 ms torques", pd5, t5)):
+        r = v / ref
+        print(
+            f"  PD every 5 ms / {name}: {r:.2f} (target <= 1.5: {'met' if r <= 1.5 else 'MISSED'})"
+        )
+    print(f"  PD every 1 ms / 20 ms torques: {pd1 / t20:.2f} (finer servo, no target)")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=5000, help="env.step calls per timing")
@@ -137,7 +216,11 @@ def main(argv=None) -> int:
         default=os.cpu_count(),
         help="numba threads of the batched env (num_threads; the env's default is 1)",
     )
+    ap.add_argument("--pd-only", action="store_true", help="only the PD-cost rows (no MuJoCo)")
     args = ap.parse_args(argv)
+    if args.pd_only:
+        pd_cost(args.rounds)
+        return 0
     for module in ("mujoco", "imageio"):  # Walker2d-v5, checked before any timing
         try:
             __import__(module)
@@ -201,6 +284,7 @@ def main(argv=None) -> int:
             f"{'met' if r1 <= 0.1 else 'MISSED'}) | batched {ours_b:.0f} steps/s (ratio "
             f"{r2:.1f}, target >= 50: {'met' if r2 >= 50 else 'MISSED'})"
         )
+    pd_cost(args.rounds)
     return 0
 
 

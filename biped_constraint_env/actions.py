@@ -1,4 +1,13 @@
-"""The action: five joint torques [N m], validated the same way in the single and vector env."""
+"""The action mappings, validated the same way in the single and vector env.
+
+* **Torques** (``action="torque"``): five joint torques [N m], held over the control period.
+* **PD targets** (``action="pd"``): five joint targets, held over the control period; the PD
+  law ``clip(Kp (target - q) + Kd (rate - q-dot), -limit, limit)`` is evaluated at every
+  physics step of ``pd_dt`` inside it (decimation, as legged-robot RL does: the policy
+  decides every ``dt``, the joint servo runs every ``pd_dt``), in compiled code
+  (:func:`nb_pd_torques`, called by the control period). ``pd_dt = dt`` holds the PD torque
+  over the period (the law of earlier versions of the env).
+"""
 
 from __future__ import annotations
 
@@ -14,6 +23,67 @@ TORQUE_LIMIT_NM = 150.0
 """Default action bound [N m] (>= 120 so that Table 2 fits)."""
 TORQUE_LIMIT_MIN_NM, TORQUE_LIMIT_MAX_NM = 1e-3, 1e6
 """Accepted range of ``torque_limit_nm`` [N m] (the control cost divides by its square)."""
+
+
+PD_KP = np.array([60.0, 150.0, 150.0, 80.0, 30.0])
+"""Proportional gains of the PD-target actions, joints 1..5 [N m / rad] (times
+``pd_gain_scale``): a target 1 rad away asks for about the torques the model-based teacher
+uses at most (a mid-stride start needs 150 N m at the swing hip at once)."""
+PD_KD = np.array([3.0, 8.0, 8.0, 4.0, 1.0])
+"""Derivative gains [N m s / rad] (times the square root of ``pd_gain_scale``; on top of
+the joints' own damping of 10)."""
+PD_DT_S = 0.005
+"""Default physics step of the PD law [s] (``pd_dt``): 200 Hz, the walking task's step; a
+control period of 20 ms applies its targets through four PD updates."""
+PCFG_NSUB, PCFG_LIMIT, PCFG_RANGE, PCFG_KP, PCFG_KD = 0, 1, 2, 3, 3 + N_ACTUATED
+"""Entries of :func:`pd_config`'s array: PD updates per period (0: torque actions), the
+torque bound [N m], the targets' half-range [rad], Kp (5), Kd (5)."""
+
+
+def check_pd_dt(pd_dt, dt: float) -> int:
+    """PD updates per control period for ``pd_dt`` [s] (None: :data:`PD_DT_S`, at most dt).
+
+    ``dt`` must be a whole multiple of ``pd_dt``.
+    """
+    if pd_dt is None:
+        pd_dt = min(PD_DT_S, dt)
+    pd_dt = check_real("pd_dt", pd_dt, 0.0, dt, low_open=True, unit=" [s]")
+    n = round(dt / pd_dt)
+    if n < 1 or abs(n * pd_dt - dt) > 1e-9 * dt:
+        raise ValueError(f"pd_dt must divide the control period dt = {dt} s, got {pd_dt}")
+    return int(n)
+
+
+def pd_config(
+    n_sub: int, limit: float, pd_range: float, kp: np.ndarray, kd: np.ndarray
+) -> np.ndarray:
+    """The PD mapping as one array for the compiled period (``n_sub`` 0: torque actions).
+
+    An action a in [-1, 1]^5 sets the targets ``base + pd_range * a`` [rad] (``base``: the
+    pose and offset, or the reference's pose at the clock).
+    """
+    return np.array([float(n_sub), float(limit), float(pd_range), *kp, *kd], dtype=np.float64)
+
+
+TORQUE_ACTIONS = pd_config(0, 0.0, 0.0, np.zeros(N_ACTUATED), np.zeros(N_ACTUATED))
+"""The :func:`pd_config` of torque actions (no PD law)."""
+
+
+@njit_noalloc
+def nb_pd_targets(base, action, pcfg, target) -> None:
+    """The PD targets: target (5,) = base + pd_range * clip(action, -1, 1) [rad]."""
+    r = pcfg[PCFG_RANGE]
+    for j in range(N_ACTUATED):
+        target[j] = base[j] + r * min(max(action[j], -1.0), 1.0)
+
+
+@njit_noalloc
+def nb_pd_torques(target, rate, q, qd, pcfg, tau) -> None:
+    """The PD torques: tau (5,) = clip(Kp (target - q[1:]) + Kd (rate - qd[1:]), +-limit)."""
+    limit = pcfg[PCFG_LIMIT]
+    for j in range(N_ACTUATED):
+        x = pcfg[PCFG_KP + j] * (target[j] - q[j + 1]) + pcfg[PCFG_KD + j] * (rate[j] - qd[j + 1])
+        tau[j] = min(max(x, -limit), limit)
 
 
 PD_BOUND = "PD-target bound"

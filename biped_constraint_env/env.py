@@ -16,9 +16,11 @@ from gymnasium import spaces
 
 from .actions import (
     PD_BOUND,
+    TORQUE_ACTIONS,
     TORQUE_LIMIT_NM,
     action_config,
     check_action_settings,
+    check_pd_dt,
     validate_action,
 )
 from .clock import ContactClock
@@ -183,6 +185,7 @@ class ConstrainedBipedEnv(gym.Env):
     | pd_around, pd_range | "fixed", 1.0 | | targets about ``pd_pose`` or the reference [rad] |
     | pd_pose, pd_gain_scale | Fig. 2, 1.0 | | the fixed pose q1..q5 [rad]; Kp x s, Kd x sqrt(s) |
     | pd_offset | zeros | | constant offset of the PD targets q1..q5 [rad] |
+    | pd_dt | min(5 ms, dt) | | physics step of the PD law [s]; divides dt (= dt: held) |
     | reference_obs | False | | append the reference's q and q-dot at the clock (12) |
     | render_mode | None | | "rgb_array" or "human" |
 
@@ -192,10 +195,14 @@ class ConstrainedBipedEnv(gym.Env):
     height and hip speed errors against the reference at the contact clock, plus 1 per
     completed step (``info["track_<term>"]``); ``rsi`` starts that fraction of the episodes at
     recorded reference states; ``action="pd"`` makes the action five joint targets, tracked by
-    the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains ``PD_KP``, ``PD_KD``
-    (``info["torque"]`` gives the torques); ``reference_obs`` shows the reference to the
-    policy. The clock restarts at every model switch; a start follows its own reference's
-    first step (rest with "rest", mid-stride with "midstride").
+    the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains ``PD_KP``, ``PD_KD``: the
+    targets hold over the control period and the law, clipped to the torque limit, is evaluated
+    at every physics step ``pd_dt`` inside it, as legged-robot envs do (decimation; 20 ms
+    periods apply their targets through four 5 ms PD updates). ``info["torque"]`` gives the
+    period's time-mean torque; the control cost is the time mean of sum(tau^2).
+    ``reference_obs`` shows the reference to the policy. The clock restarts at every model
+    switch; a start follows its own reference's first step (rest with "rest", mid-stride with
+    "midstride").
 
     ## Version History
     * v0 (unreleased, the only id): accurate physics and the walking task by default; the
@@ -209,7 +216,12 @@ class ConstrainedBipedEnv(gym.Env):
       ``start="mixed"``, ``phase_obs``; the batched env's ``num_threads`` (default 1).
       Added: the tracking task's options (``reward``, ``reference``, ``rsi``, ``action``,
       ``pd_around``, ``pd_range``, ``pd_pose``, ``pd_gain_scale``, ``pd_offset``,
-      ``reference_obs``); the defaults leave the env as it was.
+      ``reference_obs``); the defaults leave the env as it was. Changed: PD targets hold
+      over the control period with the PD law at every physics step ``pd_dt`` (added; default
+      5 ms, or dt when shorter), in compiled code; before, the PD torque of the period's
+      first state was held over the period, which ``pd_dt=dt`` keeps (at the walking task's
+      5 ms both are the same law, bit for bit). Changed: ``reset(seed=...)`` refuses a seed
+      that is not an int >= 0 (a float, a bool).
 
     Example:
         >>> import gymnasium as gym
@@ -259,6 +271,7 @@ class ConstrainedBipedEnv(gym.Env):
         pd_gain_scale: float = 1.0,
         pd_pose=None,
         pd_offset=None,
+        pd_dt: float | None = None,
         render_mode: str | None = None,
         **unknown: Any,
     ):
@@ -308,24 +321,36 @@ class ConstrainedBipedEnv(gym.Env):
         )  # fmt: skip
         ts = self.tracking_settings
         self.pd_action = ts["action"] == "pd"
-        bound = 1.0 if self.pd_action else self.torque_limit_nm
+        self.action_bound = 1.0 if self.pd_action else self.torque_limit_nm
+        self.action_bound_name = PD_BOUND if self.pd_action else "torque limit"
+        bound = self.action_bound
         self.action_space = spaces.Box(-bound, bound, (N_ACTUATED,), np.float32)
         self.phase_obs = check_bool("phase_obs", phase_obs)
         self.reference_obs = ts["reference_obs"]
         self.observation_space = observation_space(self.phase_obs, self.reference_obs)
+        self.pd_substeps = check_pd_dt(pd_dt, self.dt) if self.pd_action else 0
+        self._clock, self.tracking = make_clock_and_tracking(1, self)
         self._buf = EnvBuffers(
             1,
             self.params,
             self.options,
             self.dt,
             reward_config(self.weights, self.torque_limit_nm, self.fall_hip_height_m),
-            action_config(self.torque_limit_nm, self.out_of_range),
+            action_config(self.action_bound, self.out_of_range),
+            pcfg=self.action_mapping(),
         )
+        if self.pd_action:  # constant bases about a fixed pose: set once
+            self._buf.tgt[:], self._buf.rate[:] = self.tracking.bases(1)
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
         self._needs_reset = True  # until a reset succeeds, and again after a termination
-        self._clock, self.tracking = make_clock_and_tracking(1, self)
         self._track_reward = self.tracking_settings["reward"] == "tracking"
+
+    def action_mapping(self) -> np.ndarray:
+        """The compiled period's action mapping (:func:`~.actions.pd_config`)."""
+        if not self.pd_action:
+            return TORQUE_ACTIONS
+        return self.tracking.pd_config(self.pd_substeps)
 
     # ---------------------------------------------------------------- state access
     @property
@@ -372,15 +397,14 @@ class ConstrainedBipedEnv(gym.Env):
                 raise RuntimeError(
                     "step() called before reset() or after the episode ended; call reset()"
                 )
-            validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises if invalid
-        if self.pd_action:  # PD targets in [-1, 1] -> torques [N m]
-            a = validate_action(a, 1.0, self.out_of_range, PD_BOUND)
-            a = self.tracking.torques(a[None, :], sim.q[:1], sim.qd[:1])[0]
-        steps0 = sim.ist[0, 2]
+            validate_action(a, self.action_bound, self.out_of_range, self.action_bound_name)
+        if self.pd_action and self.tracking.pd_follows_reference:
+            buf.tgt[:1], buf.rate[:1] = self.tracking.bases(1)
         buf.act[0] = a  # as float64; checked (and clipped) in the compiled period
+        steps0 = sim.ist[0, 2]
         if buf.period():
-            validate_action(a, self.torque_limit_nm, self.out_of_range)  # raises its ValueError
-            raise AssertionError(f"the compiled torque check refused {a}, validate_action not")
+            validate_action(a, self.action_bound, self.out_of_range, self.action_bound_name)
+            raise AssertionError(f"the compiled action check refused {a}, validate_action not")
         status = sim.status[0]
         events = sim.events_of(0) if sim.n_events[0] else ()
         reason = None
@@ -396,7 +420,7 @@ class ConstrainedBipedEnv(gym.Env):
             self._needs_reset = True
         if self.render_mode == "human":
             self.render()
-        if self.pd_action:
+        if self.pd_action:  # the time-mean PD torque of the period
             info["torque"] = buf.act[0].copy()
         if self._clock is None:
             return buf.obs[0].copy(), reward, reason is not None, False, info

@@ -14,16 +14,29 @@ import numba
 import numpy as np
 from numba import njit
 
-from .actions import nb_check_torques
+from .actions import (
+    PCFG_NSUB,
+    TORQUE_ACTIONS,
+    nb_check_torques,
+    nb_pd_targets,
+    nb_pd_torques,
+)
 from .advance import PARALLEL_MIN_BATCH, nb_advance_w
-from .hybrid import nb_make_work
+from .hybrid import IO_STOP_AT_SWITCH, nb_make_work
 from .jit import njit_noalloc
 from .kinematics import NK
 from .model import N_ACTUATED, N_LINKS
 from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe, nb_observe_row
 from .rewards import nb_cycle_position, nb_fallen, nb_reward_terms
 from .simulator import SimArrays
-from .state import ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_OK, STATUS_TERMINATED
+from .state import (
+    FS_T,
+    ST_MODE,
+    ST_STEPS,
+    STATUS_NONFINITE,
+    STATUS_OK,
+    STATUS_TERMINATED,
+)
 from .stepper import nb_make_scratch
 
 N_REWARD_OUT = 6
@@ -33,31 +46,102 @@ N_REWARD_OUT = 6
 @njit(cache=True)
 def _period_range(
     chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, lo, hi,
+    REW, FELL, TGT, RATE, pcfg, lo, hi,
 ):  # fmt: skip
     """:func:`nb_env_period` for rows lo..hi-1, one workspace."""
     _period_rows(
         chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
-        cfg, REW, FELL, lo, hi, nb_make_work(), nb_make_scratch(), np.empty((N_LINKS, NK)),
-        np.empty((4, N_ACTUATED)),
+        cfg, REW, FELL, TGT, RATE, pcfg, lo, hi, nb_make_work(), nb_make_scratch(),
+        np.empty((N_LINKS, NK)), np.empty((4, N_ACTUATED)), np.empty((EV.shape[1], EV.shape[2])),
+        np.empty(N_ACTUATED), np.empty(N_ACTUATED),
     )  # fmt: skip
+
+
+@njit_noalloc
+def _pd_period(
+    chs, scs, q, qd, ist, fst, base, rate, pcfg, dt, iopt, fopt, a, b, ev, forces, W, S, table,
+    evs, tau, act, tgt,
+):  # fmt: skip
+    """One control period of PD targets: the PD law at each of ``pcfg[0]`` physics steps.
+
+    The action ``act`` (5,) in [-1, 1] sets the targets ``tgt`` = ``base`` + range x act
+    (:func:`~.actions.nb_pd_targets`); they and their rates ``rate`` (5,) hold over the
+    period; before every
+    physics step of dt / n the torques are :func:`~.actions.nb_pd_torques` of the current
+    state (the same in every model). A terminal event ends the period, and so does a model
+    switch when the options stop at switches. ``act`` (5,) receives the time-mean torque
+    [N m]; returns (status, events, time-mean of sum(tau^2) [N^2 m^2]). Events of all the
+    physics steps are collected in ``ev`` (``evs``: a scratch of its shape).
+    """
+    n_sub = int(pcfg[PCFG_NSUB])
+    h = dt / n_sub
+    stop_at_switch = iopt[IO_STOP_AT_SWITCH] != 0
+    nev = 0
+    status = 0
+    sq = 0.0
+    span = 0.0
+    nb_pd_targets(base, act, pcfg, tgt)
+    for j in range(N_ACTUATED):
+        act[j] = 0.0
+    for s in range(n_sub):
+        nb_pd_torques(tgt, rate, q, qd, pcfg, tau)
+        for m in range(4):
+            for j in range(N_ACTUATED):
+                table[m, j] = tau[j]
+        mode = ist[ST_MODE]
+        ts = fst[FS_T]
+        status, ne = nb_advance_w(
+            chs, scs, q, qd, ist, fst, table, h, iopt, fopt, a, b, evs, forces, W, S
+        )  # fmt: skip
+        for r in range(ne):
+            if nev < ev.shape[0]:
+                for c in range(ev.shape[1]):
+                    ev[nev, c] = evs[r, c]
+                nev += 1
+        tau_sq = 0.0
+        for j in range(N_ACTUATED):
+            tau_sq += tau[j] * tau[j]
+        if s == 0:  # exact for one step: the held law of earlier versions, bit for bit
+            sq = tau_sq
+            for j in range(N_ACTUATED):
+                act[j] = tau[j]
+            span = fst[FS_T] - ts
+        else:
+            w = fst[FS_T] - ts
+            tot = span + w
+            if tot > 0.0:
+                sq = (sq * span + tau_sq * w) / tot
+                for j in range(N_ACTUATED):
+                    act[j] = (act[j] * span + tau[j] * w) / tot
+            span = tot
+        if status != 0 or (stop_at_switch and ist[ST_MODE] != mode):
+            break
+    return status, nev, sq
 
 
 @njit_noalloc
 def _period_rows(
     chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, lo, hi, W, S, K, table,
+    REW, FELL, TGT, RATE, pcfg, lo, hi, W, S, K, table, evs, tau, tgt,
 ):  # fmt: skip
     """The rows' loop of :func:`_period_range`, given its workspaces.
 
     W, S: :func:`~.hybrid.nb_make_work`, :func:`~.simulator.nb_make_scratch`; K (6, NK): the
-    observation's kinematics; table (4, 5): the torque table (the action holds in every model).
+    observation's kinematics; table (4, 5): the torque table (the action holds in every model);
+    evs, tau: scratch of the PD period (:func:`_pd_period`).
     """
+    pd = pcfg[PCFG_NSUB] > 0
     for i in range(lo, hi):
         hip0 = HIP[i, 0]
         pos0 = nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS])
         steps0 = IST[i, ST_STEPS]
-        if STATUS[i] == STATUS_OK:
+        tau_sq = -1.0  # torque actions: the reward squares ACT[i]
+        if STATUS[i] == STATUS_OK and pd:
+            STATUS[i], NEV[i], tau_sq = _pd_period(
+                chs, scs, Q[i], QD[i], IST[i], FST[i], TGT[i], RATE[i], pcfg, dt, iopt, fopt,
+                a, b, EV[i], FORCES[i], W, S, table, evs, tau, ACT[i], tgt,
+            )  # fmt: skip
+        elif STATUS[i] == STATUS_OK:
             for m in range(4):
                 for j in range(N_ACTUATED):
                     table[m, j] = ACT[i, j]
@@ -67,6 +151,9 @@ def _period_rows(
             )  # fmt: skip
         else:
             NEV[i] = 0
+            if pd:  # not stepped: the torques its targets would ask for now
+                nb_pd_targets(TGT[i], ACT[i], pcfg, tgt)
+                nb_pd_torques(tgt, RATE[i], Q[i], QD[i], pcfg, ACT[i])
         nb_observe_row(
             chs, scs, Q[i], QD[i], IST[i], FST[i], FORCES[i], OBS[i], HIP[i], OBS_LOW, OBS_HIGH, K
         )
@@ -86,13 +173,14 @@ def _period_rows(
             ACT[i],
             cfg,
             REW[i],
+            tau_sq,
         )
 
 
 @njit(cache=True)
 def nb_env_period(
     chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, acfg,
+    REW, FELL, TGT, RATE, pcfg, acfg,
 ):  # fmt: skip
     """One control period of N environments (rows), serially; 0, or 1 if a torque is refused.
 
@@ -103,14 +191,17 @@ def nb_env_period(
     and HIP (n, 4), the observation and hip kinematics, read before (progress) and written
     after the period; cfg, :func:`~.rewards.reward_config`; REW (n, 6), written: the reward
     terms and their sum (zeros for rows whose STATUS is negative: resetting, not stepped);
-    FELL (n,), written: 1 where the hip fell below the fall height in this period; acfg. Rows
-    with STATUS != 0 are not advanced.
+    FELL (n,), written: 1 where the hip fell below the fall height in this period; TGT, RATE
+    (n, 5): the PD targets' base [rad] and rates [rad/s], and pcfg
+    (:func:`~.actions.pd_config`), for PD-target actions (``pcfg[0] > 0``: ACT holds the
+    actions in [-1, 1] and is then written, the time-mean torque of each row); acfg: the
+    actions' bound and clipping. Rows with STATUS != 0 are not advanced.
     """
     if nb_check_torques(ACT, acfg) != 0:
         return 1
     _period_range(
         chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
-        cfg, REW, FELL, 0, Q.shape[0],
+        cfg, REW, FELL, TGT, RATE, pcfg, 0, Q.shape[0],
     )  # fmt: skip
     return 0
 
@@ -118,7 +209,7 @@ def nb_env_period(
 @njit(cache=True, parallel=True)
 def nb_env_period_parallel(
     chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, acfg, nt,
+    REW, FELL, TGT, RATE, pcfg, acfg, nt,
 ):  # fmt: skip
     """:func:`nb_env_period` split into ``nt`` chunks of rows, one per thread (same results)."""
     if nb_check_torques(ACT, acfg) != 0:
@@ -128,7 +219,7 @@ def nb_env_period_parallel(
     for c in numba.prange(nt):
         _period_range(
             chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
-            HIP, cfg, REW, FELL, c * chunk, min(n, (c + 1) * chunk),
+            HIP, cfg, REW, FELL, TGT, RATE, pcfg, c * chunk, min(n, (c + 1) * chunk),
         )  # fmt: skip
     return 0
 
@@ -157,15 +248,20 @@ class EnvBuffers:
         cfg: np.ndarray,
         acfg: np.ndarray,
         num_threads: int = 1,
+        pcfg: np.ndarray = TORQUE_ACTIONS,
     ):
         """Allocate for ``n`` environments of a robot, physics, period [s] and settings.
 
         ``cfg``: :func:`~.rewards.reward_config`; ``acfg``: :func:`~.actions.action_config`;
         ``num_threads``: numba threads that step a batch of at least ``PARALLEL_MIN_BATCH``
-        rows (1: serial).
+        rows (1: serial); ``pcfg``: :func:`~.actions.pd_config` (PD targets in ``tgt`` and
+        ``rate``) or :data:`~.actions.TORQUE_ACTIONS` (torques in ``act``).
         """
         self.sim = SimArrays(n)
         self.act = np.zeros((n, N_ACTUATED))
+        self.tgt = np.zeros((n, N_ACTUATED))
+        self.rate = np.zeros((n, N_ACTUATED))
+        self.pcfg = np.array(pcfg, dtype=np.float64)
         self.obs = np.zeros((n, OBS_DIM))
         self.hip = np.zeros((n, 4))
         self.rew = np.zeros((n, N_REWARD_OUT))
@@ -175,7 +271,8 @@ class EnvBuffers:
         s = self.sim
         self._args = (
             chs, scs, s.q, s.qd, s.ist, s.fst, self.act, float(dt), iopt, fopt, a, b, s.events,
-            s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell, acfg,
+            s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell,
+            self.tgt, self.rate, self.pcfg, acfg,
         )  # fmt: skip
         self.num_threads = int(num_threads)
         self._parallel = n >= PARALLEL_MIN_BATCH and self.num_threads > 1

@@ -46,7 +46,7 @@ def nb_cycle_position(mode: int, steps: int) -> int:
 
 
 @njit_noalloc
-def nb_reward_terms(progress_m, dt, switches, steps, alive, tau, cfg, out):
+def nb_reward_terms(progress_m, dt, switches, steps, alive, tau, cfg, out, tau_sq=-1.0):
     """The reward terms of one control period, and their sum (see the env docstring, Rewards).
 
     Writes the terms into ``out[:5]`` (REWARD_TERMS order) and their sum into ``out[5]``.
@@ -55,11 +55,14 @@ def nb_reward_terms(progress_m, dt, switches, steps, alive, tau, cfg, out):
         progress_m: hip progress [m]. dt: control period [s]. switches: forward model switches
             in the period. steps: walking steps completed in the period. alive: whether the
             period did not end in a termination. tau: (5,) applied torques [N m]. cfg:
-            :func:`reward_config`. out: (6,) output.
+            :func:`reward_config`. out: (6,) output. tau_sq: sum(tau^2) [N^2 m^2] when the
+            torques varied over the period (its time mean; PD at the physics rate), else < 0:
+            sum(tau^2) of ``tau``.
     """
-    tau_sq = 0.0
-    for j in range(tau.shape[0]):
-        tau_sq += tau[j] * tau[j]
+    if tau_sq < 0.0:
+        tau_sq = 0.0
+        for j in range(tau.shape[0]):
+            tau_sq += tau[j] * tau[j]
     limit = cfg[CFG_LIMIT]
     out[0] = cfg[CFG_FORWARD] * progress_m / dt
     out[1] = cfg[CFG_ALIVE] * (1.0 if alive else 0.0)

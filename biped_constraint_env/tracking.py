@@ -28,7 +28,8 @@ phase. The default env uses none of it.
   legged-robot RL's default joint offsets); the torques ``Kp (target - q) + Kd (rate - q-dot)``
   (:data:`PD_KP` x ``pd_gain_scale``, :data:`PD_KD` x its square root; ``rate`` is 0 about
   the fixed pose and the reference's q-dot about the reference), clipped to the torque
-  limit, are held over the period.
+  limit, are evaluated at every physics step ``pd_dt`` while the targets hold over the
+  period (:mod:`.actions`).
 
 Clock: the reference's first step (its recording's first step from its own start) serves the
 starts of the same kind, until their first step completes: a start at rest with the rest
@@ -42,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .actions import PD_KD, PD_KP, pd_config
 from .clock import ContactClock
 from .hybrid import wrap_angles
 from .model import N_ACTUATED, N_LINKS
@@ -60,13 +62,6 @@ forward speed [(m/s)^2]. Each halves the term at an error of about: 0.37 rad (on
 3.7 rad/s, 59 mm, 0.37 m/s."""
 TRACKING_STEP_BONUS = 1.0
 """Reward per completed walking step in the tracking task (a step takes about 170 periods)."""
-PD_KP = np.array([60.0, 150.0, 150.0, 80.0, 30.0])
-"""Proportional gains of the PD-target actions, joints 1..5 [N m / rad] (times
-``pd_gain_scale``): a target 1 rad away asks for about the torques the model-based teacher
-uses at most (a mid-stride start needs 150 N m at the swing hip at once)."""
-PD_KD = np.array([3.0, 8.0, 8.0, 4.0, 1.0])
-"""Derivative gains [N m s / rad] (times the square root of ``pd_gain_scale``; on top of
-the joints' own damping of 10)."""
 PD_GAIN_SCALE_MAX = 100.0
 PD_RANGE_RAD = 1.0
 """Default half-range of the PD targets around the pose [rad] (``pd_range``)."""
@@ -234,17 +229,28 @@ class Tracking:
             c.j[slots] = np.argmin(d, axis=1)
 
     # ------------------------------------------------------------------ actions
-    def torques(self, actions: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """(n, 5) torques [N m] of PD-target actions (n, 5) in [-1, 1] at states q, qd (n, 6)."""
+    def bases(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 5) bases of the PD targets [rad] and their rates [rad/s] for ``n`` envs.
+
+        The fixed pose plus the offset (rates 0), or the reference's pose at the clock plus
+        the offset (its rates); an action a sets the targets base + ``pd_range`` x a, and the
+        compiled period applies the PD law to them (:mod:`.actions`).
+        """
+        offset = self.settings["pd_offset"]
         if self.settings["pd_around"] == "reference":
             rows = self.rows()
-            pose, rate = rows[:, 1:N_LINKS], rows[:, N_LINKS + 1 : 2 * N_LINKS]
-        else:
-            pose, rate = self.settings["pd_pose"], 0.0
-        offset = self.settings["pd_offset"]
-        target = pose + offset + self.settings["pd_range"] * np.clip(actions, -1.0, 1.0)
-        tau = self.kp * (target - q[:, 1:]) + self.kd * (rate - qd[:, 1:])
-        return np.clip(tau, -self.limit, self.limit)
+            return rows[:, 1:N_LINKS] + offset, rows[:, N_LINKS + 1 : 2 * N_LINKS]
+        base = self.settings["pd_pose"] + offset
+        return np.broadcast_to(base, (n, N_ACTUATED)), np.zeros((n, N_ACTUATED))
+
+    @property
+    def pd_follows_reference(self) -> bool:
+        """Whether the PD targets' base moves with the reference (set before every period)."""
+        return self.settings["pd_around"] == "reference"
+
+    def pd_config(self, n_sub: int) -> np.ndarray:
+        """The compiled period's PD settings (:func:`~.actions.pd_config`) for ``n_sub`` steps."""
+        return pd_config(n_sub, self.limit, self.settings["pd_range"], self.kp, self.kd)
 
     # ------------------------------------------------------------------ observation, reward
     def observation(self) -> np.ndarray:

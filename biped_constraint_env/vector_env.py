@@ -18,7 +18,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .actions import PD_BOUND, action_config, validate_actions
+from .actions import action_config, validate_actions
 from .env import (
     TRACK_KEYS,
     ConstrainedBipedEnv,
@@ -105,8 +105,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self.options,
             self.dt,
             reward_config(p.weights, p.torque_limit_nm, p.fall_hip_height_m),
-            action_config(p.torque_limit_nm, p.out_of_range),
+            action_config(p.action_bound, p.out_of_range),
             num_threads,
+            pcfg=p.action_mapping(),
         )
         self.num_threads = num_threads
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
@@ -160,20 +161,17 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             )
         p = self._proto
         buf = self._buf
-        if self._pd:
-            targets = validate_actions(actions, 1.0, p.out_of_range, PD_BOUND)
-        else:
-            tau = validate_actions(actions, p.torque_limit_nm, p.out_of_range)
+        act = validate_actions(actions, p.action_bound, p.out_of_range, p.action_bound_name)
         resetting = np.flatnonzero(self._autoreset)
         if resetting.size:
             self._reset_slots(resetting)
-        if self._pd:  # after the resets: the torques act from the states they answer
-            tau = self.tracking.torques(targets, buf.sim.q, buf.sim.qd)
+        if self._pd:  # after the resets: the targets' bases at the clocks of the new starts
+            buf.tgt[:], buf.rate[:] = self.tracking.bases(self.num_envs)
+        buf.act[:] = act
         steps0 = buf.sim.ist[:, 2].copy()
         buf.sim.status[resetting] = -1  # not stepped this period; zero reward
-        buf.act[:] = tau
         if buf.period():  # the actions were validated above, so this cannot fail
-            raise AssertionError(f"the compiled torque check refused validated torques {tau}")
+            raise AssertionError(f"the compiled action check refused validated actions {act}")
         buf.sim.status[resetting] = 0
         buf.sim.n_events[resetting] = 0
         if self._clock is not None:
@@ -201,8 +199,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         if self.max_episode_steps is not None:
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
         infos = self._infos(np.zeros(self.num_envs), parts)
-        if self._pd:
-            infos.update(torque=tau.copy(), _torque=np.ones(self.num_envs, bool))
+        if self._pd:  # the time-mean PD torque of the period
+            infos.update(torque=buf.act.copy(), _torque=np.ones(self.num_envs, bool))
         done = np.flatnonzero(terminated | truncated)
         obs = self._observation()
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:
