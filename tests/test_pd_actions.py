@@ -134,3 +134,18 @@ def test_torque_actions_reproduce_the_recorded_trajectories():
     for a, want in zip(ref["walk_actions"][:300], ref["batched_rows"], strict=True):
         obs, r, *_ = venv.step(np.repeat(a[None], 3, 0))
         assert np.array_equal(np.concatenate([obs, r[:, None]], 1), want)
+
+
+def test_the_sb3_adapter_passes_pd_targets_through():
+    """An SB3 action of 1.0 is the env's PD action 1.0, not 150 clipped to 1."""
+    from training.sb3_vec import make_sb3_vec_env
+
+    kw = {"action": "pd", "start": "rest"}
+    venv = make_sb3_vec_env(2, 0, kw, "batched")
+    venv.reset()
+    venv.step_async(np.full((2, 5), 0.5, np.float32))
+    obs, _, _, _ = venv.step_wait()
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    env.reset(seed=0)
+    want, _, _, _, _ = env.step(np.full(5, 0.5))
+    assert np.array_equal(obs[0], want.astype(np.float32))

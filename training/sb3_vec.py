@@ -73,15 +73,21 @@ def make_sb3_vec_env(
     ``vec="batched"``: the batched vector env (all simulators in one compiled call) behind
     :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
     ``"dummy"``: DummyVecEnv (one process). ``action_map``: an :class:`ActionMap` (default:
-    plain rescaling by the torque limit). ``num_threads``: numba threads of the batched env
-    (1 next to a torch process on 2 cores; see the vector env). ``max_episode_steps``: the
-    episodes' time limit in control periods (None: the registration's).
+    plain rescaling by the torque limit; with ``action="pd"`` in ``env_kwargs``, the identity:
+    the env's actions are PD targets in [-1, 1] already). ``num_threads``: numba threads of
+    the batched env (1 next to a torch process on 2 cores; see the vector env).
+    ``max_episode_steps``: the episodes' time limit in control periods (None: the
+    registration's).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import biped_constraint_env  # noqa: F401
 
     limit = float(env_kwargs.get("torque_limit_nm", TORQUE_LIMIT_NM))
+    if env_kwargs.get("action") == "pd":  # the env's actions are PD targets in [-1, 1]
+        if action_map is not None and (action_map.base is not None or action_map.limit != 1.0):
+            raise ValueError("PD-target actions take ActionMap(1.0, None, 1.0): no gear, no base")
+        action_map = action_map or ActionMap(1.0, None, 1.0)
     action_map = action_map or ActionMap(limit, limit=limit)
     limit_kw = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
     if vec == "batched":
