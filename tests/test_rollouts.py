@@ -12,10 +12,13 @@ KEYS = ("seed", "steps_completed", "end")
 
 def _check_equal(single, batched):
     assert [[e[k] for k in KEYS] for e in batched] == [[e[k] for k in KEYS] for e in single]
-    for key in ("distance_m", "return", "t_s"):
+    for key in ("distance_m", "return", "t_s", "cost_of_transport"):
         np.testing.assert_allclose(
-            [e[key] for e in batched], [e[key] for e in single], rtol=0, atol=1e-9, err_msg=key
+            [e[key] for e in batched], [e[key] for e in single], rtol=1e-9, atol=1e-9, err_msg=key
         )
+    for b, s in zip(batched, single, strict=True):  # the steps' times and hip positions
+        np.testing.assert_allclose(b["step_t_s"], s["step_t_s"], atol=1e-9)
+        np.testing.assert_allclose(b["step_hip_y_m"], s["step_hip_y_m"], atol=1e-9)
 
 
 def test_batched_episodes_of_different_lengths_equal_single_ones():

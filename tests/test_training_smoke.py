@@ -168,7 +168,8 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
     assert evaluate.main([str(run), "--episodes", "2", "--out", str(out)]) == 0
     summary = json.loads((out / "evaluation.json").read_text())
     (policy,) = summary["results"]
-    assert summary["seeds"] == [0, 1] and len(policy["episodes"]) == 2
+    assert summary["seeds"] == [500_000, 500_001] and len(policy["episodes"]) == 2  # report seeds
+    assert policy["success"]["episodes"] == 2 and "ci95" in policy["success"]
     assert (out / "figures" / "best.gif").is_file()
     assert not (run / "evaluation.json").exists()  # the run directory is only read
 

@@ -1,11 +1,15 @@
 """Evaluate a trained policy (a run directory or the committed one) on seeded episodes.
 
-    python -m training.evaluate POLICY_DIR [--episodes 10] [--seed 0] [--which final]
+    python -m training.evaluate POLICY_DIR [--episodes 200] [--seed 500000] [--which final]
         [--start midstride|rest] [--compare] [--out DIR]
 
 Runs N seeded episodes of the policy's env (its config; by default the walking task of
-ConstrainedBiped-v0, default physics, strict checks) with the deterministic network and prints
-completed steps (mean, std, min), distance, speed, torque cost and termination reasons.
+ConstrainedBiped-v0, default physics, strict checks) with the deterministic network, all at
+once in the batched env, and prints per row the success rate (at least 20 complete strict
+steps in the 30 s) with its 95% Wilson interval, completed steps (mean, std, min), distance,
+speed, cost of transport and the ends tallied. The default is 200 episodes on the report
+seeds 500000-500199, which no training, selection or development choice reads
+(:data:`training.ppo_config.REPORT_SEED_OFFSET`).
 ``--start`` picks the start (default: the config's; a policy trained on both starts is
 evaluated mid-stride); from rest the gait-initiation figures are printed too. With
 ``--compare`` it runs, on the same seeds: the imitation result alone (the run's ``imitation``
@@ -32,19 +36,29 @@ from pathlib import Path
 import numpy as np
 
 from training.common import CliParser, float_in, int_in
-from training.policy_io import SNAPSHOTS, available, load_policy, policy_actor
+from training.policy_io import (
+    SNAPSHOTS,
+    available,
+    load_policy,
+    policy_actor,
+    policy_batch_actor,
+)
+from training.ppo_config import REPORT_EPISODES, REPORT_SEED_OFFSET
 from training.rollouts import (
     PUSH_HIP_DV_M_S,
     PUSH_TIME_S,
+    TABLE_HEADER,
     initiation,
     run_episodes,
+    run_episodes_batched,
     summarize,
     table_row,
 )
 from training.safe_files import UntrustedFileError, atomic_output
+from training.stats import MIN_STEPS
 
 GIF_MAX_FRAMES = 500
-MIN_STEPS_FROM_REST = 20
+MIN_STEPS_FROM_REST = MIN_STEPS
 """Complete steps in a 30 s episode from rest that count as a successful start and walk."""
 
 
@@ -141,74 +155,94 @@ def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
     )
 
 
-def _rest_rows(actor, cfg, seeds) -> list[dict]:
+def controller_batch(spec: str, n: int):
+    """Obs (n, 24) -> torques (n, 5) of ``n`` model controllers, one per episode.
+
+    Each keeps its own start phase.
+    """
+    from training.model_controller import controller_from
+
+    ctrls = [controller_from(spec) for _ in range(n)]
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        return np.stack([c(o) for c, o in zip(ctrls, obs, strict=True)])
+
+    return act
+
+
+def batched_row(label: str, act, env_kw: dict, seeds, env_id: str, rest: bool = False) -> dict:
+    """A row of ``seeds`` episodes run at once in the batched env (initiation from rest)."""
+    t0 = time.time()
+    row = summarize(label, run_episodes_batched(act, env_kw, seeds, env_id))
+    if rest:
+        row["initiation"] = initiation(row["episodes"], MIN_STEPS_FROM_REST)
+    print(f"{table_row(row)} ({time.time() - t0:.0f} s)", flush=True)
+    return row
+
+
+def _rest_rows(batch, cfg, seeds) -> tuple[list[dict], str]:
     """The network and the teacher from rest (1x and 3x reset noise), with initiation figures."""
-    from training.model_controller import TEACHER, controller_from
+    from training.model_controller import TEACHER
 
     spec = cfg.teacher if "+" in cfg.teacher else TEACHER  # a teacher with its start phase
     kw = {**cfg.env_kwargs(), "start": "rest"}
     noisy = {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]}
     rows = []
-    teacher = controller_from(spec)
-    for label, who in (("policy", actor), (f"model controller ({spec!r})", teacher)):
+    who = (("policy", lambda: batch), (f"model controller ({spec!r})",
+           lambda: controller_batch(spec, len(seeds))))  # fmt: skip
+    for label, make in who:
         for suffix, env_kw in (("", kw), (", 3x reset noise", noisy)):
-            name = f"{label} from rest{suffix}"
-            row = summarize(name, run_episodes(who, env_kw, seeds, cfg.env_id, desc=name))
-            row["initiation"] = initiation(row["episodes"], MIN_STEPS_FROM_REST)
-            rows.append(row)
-    return rows, teacher
+            rows.append(batched_row(f"{label} from rest{suffix}", make(), env_kw, seeds,
+                                    cfg.env_id, rest=True))  # fmt: skip
+    return rows, spec
 
 
-def _rows_compare(run_dir: Path, actor, cfg, seeds, out_dir: Path) -> list[dict]:
+PUSH_EPISODES = 20
+"""Episodes of the ``--compare`` push rows (single env: the push is applied between periods)."""
+
+
+def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> list[dict]:
     """The ``--compare`` rows: stresses of the policy, imitation alone, teacher, Table 2."""
     from training.model_controller import controller_from
 
     kw = cfg.env_kwargs()
-    rows = [
-        summarize(
-            "policy, 3x reset noise",
-            run_episodes(
-                actor,
-                {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]},
-                seeds,
-                cfg.env_id,
-                desc="3x noise",
-            ),
-        ),
-        summarize(
-            f"policy, push {PUSH_HIP_DV_M_S} m/s at {PUSH_TIME_S} s",
-            run_episodes(actor, kw, seeds, cfg.env_id, push_at_s=PUSH_TIME_S, desc="push"),
-        ),
-    ]
+    noisy = {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]}
+    few = seeds[:PUSH_EPISODES]
+    rows = [batched_row("policy, 3x reset noise", batch, noisy, seeds, cfg.env_id)]
+    rows.append(summarize(
+        f"policy, push {PUSH_HIP_DV_M_S} m/s at {PUSH_TIME_S} s",
+        run_episodes(actor, kw, few, cfg.env_id, push_at_s=PUSH_TIME_S, desc="push"),
+    ))  # fmt: skip
     if available(run_dir, "imitation"):
         policy, norm, _, _ = load_policy(run_dir, "imitation")
         rows.append(
-            summarize(
+            batched_row(
                 "imitation alone (DART + DAgger, before PPO)",
-                run_episodes(
-                    policy_actor(policy, norm, cfg), kw, seeds, cfg.env_id, desc="imitation alone"
-                ),
+                policy_batch_actor(policy, norm, cfg),
+                kw,
+                seeds,
+                cfg.env_id,
             )
         )
     spec = cfg.teacher or "model"
-    teacher = controller_from(spec)
     rows.append(
-        summarize(
+        batched_row(
             f"model controller ({spec!r}, the teacher) alone",
-            run_episodes(teacher, kw, seeds, cfg.env_id, desc="model controller"),
+            controller_batch(spec, len(seeds)),
+            kw,
+            seeds,
+            cfg.env_id,
         )
     )
-    rows.append(
-        summarize(
-            f"model controller, push {PUSH_HIP_DV_M_S} m/s",
-            run_episodes(
-                teacher, kw, seeds, cfg.env_id, push_at_s=PUSH_TIME_S, desc="controller, push"
-            ),
-        )
-    )
-    rest, teacher = _rest_rows(actor, cfg, seeds)
+    rows.append(summarize(
+        f"model controller, push {PUSH_HIP_DV_M_S} m/s",
+        run_episodes(controller_from(spec), kw, few, cfg.env_id, push_at_s=PUSH_TIME_S,
+                     desc="controller, push"),
+    ))  # fmt: skip
+    rest, spec = _rest_rows(batch, cfg, seeds)
     rows += rest
-    rest_strip(teacher, cfg, out_dir / "figures" / "rest_start_teacher.png", "the teacher")
+    rest_strip(controller_from(spec), cfg, out_dir / "figures" / "rest_start_teacher.png",
+               "the teacher")  # fmt: skip
     print("Table 2 open loop from rest (paper preset; default physics at 2 ms; walking task)")
     return rows + open_loop_baselines()
 
@@ -217,8 +251,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Evaluate and write the outputs."""
     ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path, help="a run directory or a committed policy")
-    ap.add_argument("--episodes", type=int_in(1, 100_000), default=10)
-    ap.add_argument("--seed", type=int_in(0, 2**31 - 1), default=0, help="episode i: seed + i")
+    ap.add_argument(
+        "--episodes", type=int_in(1, 100_000), default=REPORT_EPISODES,
+        help=f"episodes per row (default {REPORT_EPISODES})",
+    )  # fmt: skip
+    ap.add_argument(
+        "--seed", type=int_in(0, 2**31 - 1), default=REPORT_SEED_OFFSET,
+        help=f"episode i uses seed + i (default {REPORT_SEED_OFFSET}: the report seeds)",
+    )  # fmt: skip
     ap.add_argument("--which", default="final", choices=sorted(SNAPSHOTS), help="snapshot")
     ap.add_argument(
         "--start",
@@ -280,17 +320,14 @@ def _evaluate(args, policy, norm, cfg, state, start, out_dir, t0, shown=None) ->
     (out_dir / "figures").mkdir(parents=True, exist_ok=True)
     seeds = list(range(args.seed, args.seed + args.episodes))
     actor = policy_actor(policy, norm, cfg)
+    batch = policy_batch_actor(policy, norm, cfg)
     label = "policy" + ("" if cfg.base_controller == "" else " (residual on the model controller)")
     label += f" ({start} start)"
-    main_row = summarize(
-        label, run_episodes(actor, cfg.env_kwargs(), seeds, cfg.env_id, desc="policy episodes")
-    )
-    if start == "rest":
-        main_row["initiation"] = initiation(main_row["episodes"], MIN_STEPS_FROM_REST)
-    print(table_row(main_row), flush=True)
+    print(TABLE_HEADER, flush=True)
+    main_row = batched_row(label, batch, cfg.env_kwargs(), seeds, cfg.env_id, start == "rest")
     rows = [main_row]
     if args.compare:
-        rows += _rows_compare(args.run_dir, actor, cfg, seeds, out_dir)
+        rows += _rows_compare(args.run_dir, actor, batch, cfg, seeds, out_dir)
     steps = np.array([e["steps_completed"] for e in main_row["episodes"]], dtype=float)
     dist = np.array([e["distance_m"] for e in main_row["episodes"]])
     order = np.argsort(steps + 1e-3 * dist)
@@ -313,11 +350,7 @@ def _evaluate(args, policy, norm, cfg, state, start, out_dir, t0, shown=None) ->
         f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, {start} start, strict physics; "
         f"in the loop: {cfg.in_the_loop()}:"
     )
-    print(
-        "| controller | complete steps (mean ± std, min) | distance [m] | speed [m/s] | "
-        "torque cost [N² m s per m] | ends |"
-    )
-    print("|---|---|---|---|---|---|")
+    print(TABLE_HEADER)
     for r in rows:
         print(table_row(r))
     init = [r for r in rows if "initiation" in r]

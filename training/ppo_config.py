@@ -332,6 +332,12 @@ SELECTION_SEED_OFFSET = 10_000
 """Seeds of the periodic evaluations that select ``best/`` (and rank sweep trials)."""
 IMITATION_CHECK_SEED_OFFSET = 20_000
 """Seeds of the student episodes that report each imitation round's progress."""
+REPORT_SEED_OFFSET = 500_000
+"""The report seeds: ``training.evaluate``'s default episodes start here. No training
+(``TRAIN_SEED_OFFSET``, ``DEMO_SEED_OFFSET``), selection (``SELECTION_SEED_OFFSET``), imitation
+check or development choice reads seeds in [500000, 600000)."""
+REPORT_EPISODES = 200
+"""Episodes per row of a report (a 5% failure rate shows as about 10 failures)."""
 
 
 def bc_weights(cfg: PPOConfig) -> np.ndarray:

@@ -8,10 +8,17 @@ periodic evaluations that select ``best/``).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 
 import numpy as np
+
+from biped_constraint_env.model import N_LINKS
+from training.stats import format_success, success
+
+JOINT_RATES = slice(N_LINKS + 1, 2 * N_LINKS)
+"""The joint rates q-dot 1..5 in the observation (the cost of transport's work)."""
 
 PUSH_HIP_DV_M_S = (-0.3, 0.0)
 """The push of ``--compare``: a sudden change of the hip's velocity (y, z) [m/s] (backward),
@@ -72,12 +79,15 @@ def run_episodes(
     from training.common import progress
 
     env = gym.make(env_id, **env_kwargs, render_mode="rgb_array" if record else None)
+    params = env.unwrapped.params
+    weight = params.total_mass_kg * params.gravity_mps2
     out = []
     for k, seed in enumerate(progress(seeds, len(seeds), desc, enabled=bool(desc))):
         obs, info = env.reset(seed=int(seed))
         if hasattr(actor, "reset"):  # a controller with per-episode memory (a start phase)
             actor.reset()
         y0, t_prev, cost, ret, done, pushed = info["hip_y"], 0.0, 0.0, 0.0, False, False
+        work = 0.0
         steps, step_t, step_hip, first_m = 0, [], [], None
         while not done:
             if record:
@@ -89,6 +99,7 @@ def run_episodes(
             obs, r, term, trunc, info = env.step(tau)
             applied = info.get("torque", tau)  # PD-target actions: the torques they gave
             cost += float(np.sum(np.square(applied))) * (info["t"] - t_prev)
+            work += float(np.abs(applied * obs[JOINT_RATES]).sum()) * (info["t"] - t_prev)
             t_prev = info["t"]
             ret += r
             done = term or trunc
@@ -106,6 +117,7 @@ def run_episodes(
                 "distance_m": dist,
                 "speed_m_s": dist / max(info["t"], 1e-9),
                 "torque_cost": cost / max(dist, 1e-3) if dist > 0 else float("nan"),
+                "cost_of_transport": work / (weight * dist) if dist > 0 else math.nan,
                 "return": ret,
                 "t_s": info["t"],
                 "end": info["termination_reason"] or "time_limit",
@@ -132,8 +144,11 @@ def run_episodes_batched(
     ``seeds[i]`` (same start, physics, checks and time limit; the batched env steps the same
     compiled simulator), so the per-episode steps, distance, return and end equal
     :func:`run_episodes`' for a controller that gives the same torques batched as alone. It
-    costs about one episode's wall time instead of one per seed; it records no per-step data
-    (step times, torque cost).
+    costs about one episode's wall time instead of one per seed; it records the steps' times
+    and hip positions, not the torque cost or the first step's length, and the cost of
+    transport: the positive and negative joint work
+    sum(|tau q-dot|) dt (the torques of each period, the rates at its end) per weight and
+    distance [1] (``cost_of_transport``; NaN for an episode that did not move forward).
     """
     import gymnasium as gym
 
@@ -148,18 +163,33 @@ def run_episodes_batched(
     )
     obs, info = venv.reset(seed=[int(s) for s in seeds])
     y0 = info["hip_y"].copy()
+    t_prev = info["t"].copy()
     ret = np.zeros(len(seeds))
+    work = np.zeros(len(seeds))
     live = np.ones(len(seeds), bool)
     final = {}
+    steps = np.zeros(len(seeds), np.int64)
+    step_t: list[list[float]] = [[] for _ in seeds]
+    step_hip: list[list[float]] = [[] for _ in seeds]
     while live.any():
         tau = np.asarray(act(obs), dtype=np.float64)
         tau[~live] = 0.0  # finished episodes autoreset on this step; their action is ignored
         obs, r, term, trunc, info = venv.step(tau)
+        applied = info.get("torque", tau)  # PD actions: the period's mean torque
+        power = np.abs(applied * obs[:, JOINT_RATES]).sum(axis=1)
+        work[live] += (power * (info["t"] - t_prev))[live]
+        t_prev = info["t"].copy()
         ret[live] += r[live]
+        for i in np.flatnonzero(live & (info["steps_completed"] > steps)):
+            steps[i] = info["steps_completed"][i]
+            step_t[i].append(float(info["t"][i]))
+            step_hip[i].append(float(info["hip_y"][i] - y0[i]))
         for i in np.flatnonzero(live & (term | trunc)):
             live[i] = False
             final[i] = {k: info[k][i] for k in ("steps_completed", "hip_y", "t")}
             final[i]["end"] = info["termination_reason"][i] or "time_limit"
+    params = venv.unwrapped.params
+    weight = params.total_mass_kg * params.gravity_mps2
     venv.close()
     out = []
     for i, seed in enumerate(seeds):
@@ -174,6 +204,10 @@ def run_episodes_batched(
                 "return": float(ret[i]),
                 "t_s": float(f["t"]),
                 "end": f["end"],
+                "cost_of_transport": float(work[i] / (weight * dist)) if dist > 0 else math.nan,
+                "step_t_s": step_t[i],
+                "step_hip_y_m": step_hip[i],
+                "first_step_m": math.nan,  # (the single env's run_episodes measures it)
             }
         )
     return out
@@ -224,7 +258,8 @@ def summarize(label: str, eps: list[dict]) -> dict:
     s = np.array([e["steps_completed"] for e in eps], dtype=float)
     d = np.array([e["distance_m"] for e in eps])
     v = np.array([e["speed_m_s"] for e in eps])
-    c = np.array([e["torque_cost"] for e in eps])
+    c = np.array([e.get("torque_cost", math.nan) for e in eps])
+    cot = np.array([e.get("cost_of_transport", math.nan) for e in eps])
     return {
         "controller": label,
         "episodes": eps,
@@ -235,16 +270,26 @@ def summarize(label: str, eps: list[dict]) -> dict:
         "distance_std_m": d.std(),
         "speed_mean_m_s": v.mean(),
         "torque_cost_mean": float(np.nanmean(c)) if np.isfinite(c).any() else float("nan"),
+        "cost_of_transport_mean": float(np.nanmean(cot)) if np.isfinite(cot).any() else math.nan,
+        "success": success([e["steps_completed"] for e in eps]),
         "ends": dict(Counter(e["end"] for e in eps)),
     }
 
 
+TABLE_HEADER = (
+    "| controller | success (>= 20 steps in 30 s), 95% CI | complete steps (mean ± std, min) | "
+    "distance [m] | speed [m/s] | cost of transport | ends |\n|---|---|---|---|---|---|---|"
+)
+"""The header of :func:`table_row`'s rows."""
+
+
 def table_row(r: dict) -> str:
-    """One markdown row of a :func:`summarize` result."""
+    """One markdown row of a :func:`summarize` result (columns of :data:`TABLE_HEADER`)."""
     return (
-        f"| {r['controller']} | {r['steps_mean']:.1f} ± {r['steps_std']:.1f}, min {r['steps_min']}"
-        f" | {r['distance_mean_m']:.2f} ± {r['distance_std_m']:.2f} | {r['speed_mean_m_s']:.2f} "
-        f"| {r['torque_cost_mean']:.0f} | {r['ends']} |"
+        f"| {r['controller']} | {format_success(r['success'])} | {r['steps_mean']:.1f} ± "
+        f"{r['steps_std']:.1f}, min {r['steps_min']} | {r['distance_mean_m']:.2f} ± "
+        f"{r['distance_std_m']:.2f} | {r['speed_mean_m_s']:.2f} | "
+        f"{r['cost_of_transport_mean']:.2f} | {r['ends']} |"
     )
 
 

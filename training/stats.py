@@ -1,0 +1,44 @@
+"""Success rates with 95% intervals: the walking claims' statistics.
+
+A success is an episode of at least :data:`MIN_STEPS` complete strict steps in its 30 s. A
+rate over n episodes comes with the Wilson score interval (Wilson 1927), which stays inside
+[0, 1] and keeps its coverage near 0 and 1 where the normal approximation fails (10 of 10
+successes: [0.72, 1.00], not [1.00, 1.00]).
+"""
+
+from __future__ import annotations
+
+import math
+
+MIN_STEPS = 20
+"""Complete steps in a 30 s episode that make it a success (walking, not a stumble)."""
+Z95 = 1.959963984540054
+"""The standard normal's 97.5% quantile (a two-sided 95% interval)."""
+
+
+def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """The Wilson score interval of k successes in n trials (95% by default)."""
+    if n <= 0 or not 0 <= k <= n:
+        raise ValueError(f"need 0 <= k <= n and n > 0, got k={k}, n={n}")
+    p = k / n
+    den = 1.0 + z * z / n
+    mid = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return max(0.0, mid - half), min(1.0, mid + half)
+
+
+def success(steps: list[int], min_steps: int = MIN_STEPS) -> dict:
+    """Successes, episodes, rate and its 95% interval of episodes' completed steps."""
+    n = len(steps)
+    k = sum(s >= min_steps for s in steps)
+    lo, hi = wilson_interval(k, n)
+    return {"successes": k, "episodes": n, "rate": k / n, "ci95": (lo, hi), "min_steps": min_steps}
+
+
+def format_success(s: dict) -> str:
+    """``97.5% [94.3, 98.9] (195/200)``."""
+    lo, hi = s["ci95"]
+    return (
+        f"{100 * s['rate']:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}] "
+        f"({s['successes']}/{s['episodes']})"
+    )
