@@ -250,7 +250,11 @@ def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> lis
 def main(argv: Sequence[str] | None = None) -> int:
     """Evaluate and write the outputs."""
     ap = CliParser(description=__doc__.splitlines()[0])
-    ap.add_argument("run_dir", type=Path, help="a run directory or a committed policy")
+    ap.add_argument("run_dir", type=Path, nargs="?", help="a run directory or a committed policy")
+    ap.add_argument(
+        "--controller", default=None, metavar="model:NAME[+NAME]",
+        help="evaluate a shipped model controller instead (e.g. model:teacher_robust+start_rest)",
+    )  # fmt: skip
     ap.add_argument(
         "--episodes", type=int_in(1, 100_000), default=REPORT_EPISODES,
         help=f"episodes per row (default {REPORT_EPISODES})",
@@ -278,51 +282,84 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="output folder, replaced when complete (default: runs/evaluate/NAME_WHICH_START)",
     )
     args = ap.parse_args(argv)
+    if (args.run_dir is None) == (args.controller is None):
+        ap.error("give a run directory or --controller, not both")
+    if args.controller and args.compare:
+        ap.error("--compare needs a run directory (its teacher, imitation and stresses)")
     if args.out is not None and (args.out / "config.toml").exists():
         ap.error(f"--out {args.out} is a run or policy directory; give a folder of its own")
     t0 = time.time()
-    print(f"loading {args.run_dir} ({args.which}) and the simulator", flush=True)
+    print(f"loading {args.run_dir or args.controller} and the simulator", flush=True)
     import torch
 
     torch.set_num_threads(1)
     try:
-        policy, norm, cfg, state = load_policy(args.run_dir, args.which)
-    except (FileNotFoundError, UntrustedFileError) as e:
+        loop = _controller_loop(args) if args.controller else _policy_loop(args)
+    except (FileNotFoundError, UntrustedFileError, ValueError) as e:
         ap.error(str(e))
     import biped_constraint_env  # noqa: F401  (compiles on a machine's first run)
 
+    cfg = loop["cfg"]
     start = args.start or cfg.evaluation_start()
     cfg = replace(cfg, start=start)
     if args.dt is not None:
         cfg = replace(cfg, dt=args.dt)
     if args.hold:
         cfg = replace(cfg, hold_torques=True)
-    out = (
-        args.out
-        or Path("runs") / "evaluate" / f"{args.run_dir.resolve().name}_{args.which}_{start}"
-    )
+    loop["cfg"] = cfg
+    name = args.run_dir.resolve().name if args.run_dir else args.controller.replace(":", "_")
+    out = args.out or Path("runs") / "evaluate" / f"{name}_{args.which}_{start}"
     try:
         with atomic_output(out) as tmp:
-            _evaluate(args, policy, norm, cfg, state, start, tmp, t0, out)
+            _evaluate(args, loop, start, tmp, t0, out)
     except UntrustedFileError as e:
         ap.error(str(e))
     print(f"wrote {out}")
     return 0
 
 
-def _evaluate(args, policy, norm, cfg, state, start, out_dir, t0, shown=None) -> None:
+def _policy_loop(args) -> dict:
+    """What runs for a run directory: its network (and the config it was trained with)."""
+    policy, norm, cfg, state = load_policy(args.run_dir, args.which)
+    label = "policy" + ("" if cfg.base_controller == "" else " (residual on the model controller)")
+    return {
+        "cfg": cfg, "label": label, "policy": (policy, norm),
+        "what": f"{state.get('num_timesteps', 0)} PPO env steps",
+    }  # fmt: skip
+
+
+def _controller_loop(args) -> dict:
+    """What runs for ``--controller``: the model controller on the default walking task."""
+    from training.model_controller import controller_from
+    from training.ppo_config import PPOConfig
+
+    controller_from(args.controller)  # refuses an unknown name here
+    PPOConfig(teacher=args.controller).check_untrusted()  # shipped names only
+    cfg = PPOConfig(start="mixed")
+    return {"cfg": cfg, "label": f"model controller ({args.controller!r})", "policy": None,
+            "what": "a model controller"}  # fmt: skip
+
+
+def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     """Run the rows and write the outputs into ``out_dir`` (a fresh temporary directory)."""
+    from training.model_controller import controller_from
+
+    cfg = loop["cfg"]
+    in_the_loop = cfg.in_the_loop() if loop["policy"] else f"the {loop['label']}"
     print(
-        f"loaded in {time.time() - t0:.0f} s ({state.get('num_timesteps', 0)} PPO env steps); "
-        f"{args.episodes} episodes of up to 30 s each; in the loop: {cfg.in_the_loop()}",
+        f"loaded in {time.time() - t0:.0f} s ({loop['what']}); {args.episodes} episodes of up "
+        f"to 30 s each; in the loop: {in_the_loop}",
         flush=True,
     )
     (out_dir / "figures").mkdir(parents=True, exist_ok=True)
     seeds = list(range(args.seed, args.seed + args.episodes))
-    actor = policy_actor(policy, norm, cfg)
-    batch = policy_batch_actor(policy, norm, cfg)
-    label = "policy" + ("" if cfg.base_controller == "" else " (residual on the model controller)")
-    label += f" ({start} start)"
+    if loop["policy"]:
+        actor = policy_actor(*loop["policy"], cfg)
+        batch = policy_batch_actor(*loop["policy"], cfg)
+    else:
+        actor = controller_from(args.controller)
+        batch = controller_batch(args.controller, len(seeds))
+    label = f"{loop['label']} ({start} start)"
     print(TABLE_HEADER, flush=True)
     main_row = batched_row(label, batch, cfg.env_kwargs(), seeds, cfg.env_id, start == "rest")
     rows = [main_row]
@@ -339,7 +376,7 @@ def _evaluate(args, policy, norm, cfg, state, start, out_dir, t0, shown=None) ->
     summary = {
         "which": args.which,
         "start": start,
-        "in_the_loop": cfg.in_the_loop(),
+        "in_the_loop": in_the_loop,
         "env_kwargs": cfg.env_kwargs(),
         "seeds": seeds,
         "results": rows,
@@ -348,7 +385,7 @@ def _evaluate(args, policy, norm, cfg, state, start, out_dir, t0, shown=None) ->
     print(
         f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "
         f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, {start} start, strict physics; "
-        f"in the loop: {cfg.in_the_loop()}:"
+        f"in the loop: {in_the_loop}:"
     )
     print(TABLE_HEADER)
     for r in rows:
