@@ -28,6 +28,7 @@ from .model import N_ACTUATED, BipedParams, paper_biped
 from .modes import EventCode
 from .observation import observation_space
 from .period import EnvBuffers
+from .perturbations import Perturbations, perturbation_settings
 from .rewards import (
     REWARD_TERMS,
     TERMINATION_FALL,
@@ -272,6 +273,7 @@ class ConstrainedBipedEnv(gym.Env):
         pd_pose=None,
         pd_offset=None,
         pd_dt: float | None = None,
+        perturbations: dict[str, Any] | None = None,
         render_mode: str | None = None,
         **unknown: Any,
     ):
@@ -341,6 +343,8 @@ class ConstrainedBipedEnv(gym.Env):
         )
         if self.pd_action:  # constant bases about a fixed pose: set once
             self._buf.tgt[:], self._buf.rate[:] = self.tracking.bases(1)
+        self.perturbation_settings = perturbation_settings(perturbations)
+        self._perturb = Perturbations(1, self.perturbation_settings, self.params, self._buf)
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
         self._needs_reset = True  # until a reset succeeds, and again after a termination
@@ -378,6 +382,7 @@ class ConstrainedBipedEnv(gym.Env):
             start_clocks(self._clock, self.tracking, slot, self._sim)
         else:
             draw_episode_starts(self, self._sim, slot, [self.np_random], self._clock, self.tracking)
+        self._perturb.start(slot, [self.np_random])
         self._needs_reset = False
         self._observe()
         info = self._info((), (0.0,) * len(REWARD_TERMS), None)
@@ -400,6 +405,8 @@ class ConstrainedBipedEnv(gym.Env):
             validate_action(a, self.action_bound, self.out_of_range, self.action_bound_name)
         if self.pd_action and self.tracking.pd_follows_reference:
             buf.tgt[:1], buf.rate[:1] = self.tracking.bases(1)
+        if self.perturbation_settings.active:  # pushes due now; the delayed action
+            a = self._perturb.before_period(a[None, :].astype(np.float64), [self.np_random], [0])[0]
         buf.act[0] = a  # as float64; checked (and clipped) in the compiled period
         steps0 = sim.ist[0, 2]
         if buf.period():
@@ -422,8 +429,11 @@ class ConstrainedBipedEnv(gym.Env):
             self.render()
         if self.pd_action:  # the time-mean PD torque of the period
             info["torque"] = buf.act[0].copy()
+        if self.perturbation_settings.push_impulse_ns is not None:
+            info["push_impulse_ns"] = float(self._perturb.push_ns[0])
+            info["push_dv_m_s"] = float(self._perturb.push_dv[0])
         if self._clock is None:
-            return buf.obs[0].copy(), reward, reason is not None, False, info
+            return self._observation(), reward, reason is not None, False, info
         self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
         if self.tracking is not None:
             self.tracking.after_period(sim.ist[:1, 2])
@@ -437,10 +447,13 @@ class ConstrainedBipedEnv(gym.Env):
         return self._observation(), reward, reason is not None, False, info
 
     def _observation(self) -> np.ndarray:
-        """The observation (with the phase and reference entries when asked for)."""
-        if self._clock is None:
-            return self._obs[0].copy()
-        return observations(self._obs, self._clock, self.tracking, self)[0]
+        """The observation (with the phase and reference entries, and noise, when asked for)."""
+        obs = (
+            self._obs
+            if self._clock is None
+            else observations(self._obs, self._clock, self.tracking, self)
+        )
+        return self._perturb.observe(obs, [self.np_random], [0])[0].copy()
 
     def _observe(self) -> None:
         self._buf.observe()

@@ -98,12 +98,15 @@ def nb_observe_row(chs, scs, q, qd, ist, fst, forces, obs, hip, low, high, K):
 
 
 @njit(cache=True)
-def nb_observe(chs, scs, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
-    """Fill OBS (n, 24), clipped to [low, high], and HIP (n, 4: hip y, z, vy, vz)."""
+def nb_observe(CHS, SCS, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
+    """Fill OBS (n, 24), clipped to [low, high], and HIP (n, 4: hip y, z, vy, vz).
+
+    CHS (n, 2, 6, 6), SCS (n, 2, 7): each row's packed robot.
+    """
     K = np.empty((N_LINKS, NK))
     for i in range(Q.shape[0]):
         nb_observe_row(
-            chs, scs, Q[i], QD[i], IST[i], FST[i], FORCES[i], OBS[i], HIP[i], low, high, K
+            CHS[i], SCS[i], Q[i], QD[i], IST[i], FST[i], FORCES[i], OBS[i], HIP[i], low, high, K
         )
 
 

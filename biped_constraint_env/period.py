@@ -45,12 +45,12 @@ N_REWARD_OUT = 6
 
 @njit(cache=True)
 def _period_range(
-    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
     REW, FELL, TGT, RATE, pcfg, lo, hi,
 ):  # fmt: skip
     """:func:`nb_env_period` for rows lo..hi-1, one workspace."""
     _period_rows(
-        chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
+        CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
         cfg, REW, FELL, TGT, RATE, pcfg, lo, hi, nb_make_work(), nb_make_scratch(),
         np.empty((N_LINKS, NK)), np.empty((4, N_ACTUATED)), np.empty((EV.shape[1], EV.shape[2])),
         np.empty(N_ACTUATED), np.empty(N_ACTUATED),
@@ -121,7 +121,7 @@ def _pd_period(
 
 @njit_noalloc
 def _period_rows(
-    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
     REW, FELL, TGT, RATE, pcfg, lo, hi, W, S, K, table, evs, tau, tgt,
 ):  # fmt: skip
     """The rows' loop of :func:`_period_range`, given its workspaces.
@@ -132,6 +132,8 @@ def _period_rows(
     """
     pd = pcfg[PCFG_NSUB] > 0
     for i in range(lo, hi):
+        chs = CHS[i]  # the row's robot (its own masses, damping, K: model randomisation)
+        scs = SCS[i]
         hip0 = HIP[i, 0]
         pos0 = nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS])
         steps0 = IST[i, ST_STEPS]
@@ -179,10 +181,13 @@ def _period_rows(
 
 @njit(cache=True)
 def nb_env_period(
-    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
     REW, FELL, TGT, RATE, pcfg, acfg,
 ):  # fmt: skip
     """One control period of N environments (rows), serially; 0, or 1 if a torque is refused.
+
+    CHS (n, 2, 6, 6), SCS (n, 2, 7): each row's packed robot (:attr:`~.model.BipedParams.packed`;
+    rows differ under model randomisation).
 
     ACT (n, 5), the actions (torques [N m], held over the period in every model), is checked
     (and clipped) first, every row, by :func:`~.actions.nb_check_torques` with ``acfg``; if it
@@ -200,7 +205,7 @@ def nb_env_period(
     if nb_check_torques(ACT, acfg) != 0:
         return 1
     _period_range(
-        chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
+        CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
         cfg, REW, FELL, TGT, RATE, pcfg, 0, Q.shape[0],
     )  # fmt: skip
     return 0
@@ -208,7 +213,7 @@ def nb_env_period(
 
 @njit(cache=True, parallel=True)
 def nb_env_period_parallel(
-    chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
+    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
     REW, FELL, TGT, RATE, pcfg, acfg, nt,
 ):  # fmt: skip
     """:func:`nb_env_period` split into ``nt`` chunks of rows, one per thread (same results)."""
@@ -218,7 +223,7 @@ def nb_env_period_parallel(
     chunk = (n + nt - 1) // nt
     for c in numba.prange(nt):
         _period_range(
-            chs, scs, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
+            CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
             HIP, cfg, REW, FELL, TGT, RATE, pcfg, c * chunk, min(n, (c + 1) * chunk),
         )  # fmt: skip
     return 0
@@ -267,17 +272,20 @@ class EnvBuffers:
         self.rew = np.zeros((n, N_REWARD_OUT))
         self.fell = np.zeros(n, np.int64)
         chs, scs = params.packed
+        self.chs = np.repeat(chs[None], n, axis=0)  # each row's robot (set_params changes one)
+        self.scs = np.repeat(scs[None], n, axis=0)
         iopt, fopt, a, b = options.packed
         s = self.sim
         self._args = (
-            chs, scs, s.q, s.qd, s.ist, s.fst, self.act, float(dt), iopt, fopt, a, b, s.events,
-            s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell,
+            self.chs, self.scs, s.q, s.qd, s.ist, s.fst, self.act, float(dt), iopt, fopt, a, b,
+            s.events, s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell,
             self.tgt, self.rate, self.pcfg, acfg,
         )  # fmt: skip
         self.num_threads = int(num_threads)
         self._parallel = n >= PARALLEL_MIN_BATCH and self.num_threads > 1
         self._observe_args = (
-            chs, scs, s.q, s.qd, s.ist, s.fst, s.forces, self.obs, self.hip, OBS_LOW, OBS_HIGH,
+            self.chs, self.scs, s.q, s.qd, s.ist, s.fst, s.forces, self.obs, self.hip, OBS_LOW,
+            OBS_HIGH,
         )  # fmt: skip
         self._bind()
 
@@ -296,6 +304,10 @@ class EnvBuffers:
         """Restore the arrays and bind the compiled entry points again."""
         self.__dict__.update(state)
         self._bind()
+
+    def set_params(self, i: int, params) -> None:
+        """Row ``i`` steps the robot ``params`` (:class:`~.model.BipedParams`) from now on."""
+        self.chs[i], self.scs[i] = params.packed
 
     def period(self) -> int:
         """One period of every row: 0, or 1 if a torque in ``act`` is refused (nothing done).

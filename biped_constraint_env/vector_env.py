@@ -29,6 +29,7 @@ from .env import (
 )
 from .model import N_ACTUATED
 from .period import EnvBuffers
+from .perturbations import Perturbations
 from .rewards import REWARD_TERMS, TERMINATION_FALL, TERMINATION_NON_FINITE, reward_config
 from .simulator import evaluate
 from .starts import check_start_state, state_from_options
@@ -113,6 +114,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._needs_reset = True  # until the first reset succeeds
         self._clock, self.tracking = make_clock_and_tracking(num_envs, p)
+        self._perturb = Perturbations(num_envs, p.perturbation_settings, p.params, self._buf)
         self._track_reward = p.tracking_settings["reward"] == "tracking"
         self._pd = p.pd_action
         self._elapsed = np.zeros(num_envs, np.int64)
@@ -125,6 +127,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
         rngs = [self._rngs[i] for i in idx]
         draw_episode_starts(self._proto, self._sim, idx, rngs, self._clock, self.tracking)
+        self._perturb.start(idx, rngs)
         self._elapsed[idx] = 0
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
@@ -142,6 +145,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
                 )
             self._elapsed[:] = 0
             start_clocks(self._clock, self.tracking, np.arange(self.num_envs), self._sim)
+            self._perturb.start(np.arange(self.num_envs), self._rngs)
         else:
             self._reset_slots(np.arange(self.num_envs))
         self._autoreset[:] = False
@@ -167,6 +171,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self._reset_slots(resetting)
         if self._pd:  # after the resets: the targets' bases at the clocks of the new starts
             buf.tgt[:], buf.rate[:] = self.tracking.bases(self.num_envs)
+        if self._perturb.s.active:  # pushes due now (stepped rows); the delayed actions
+            stepped_rows = np.flatnonzero(~self._autoreset)
+            act = self._perturb.before_period(act, self._rngs, stepped_rows)
         buf.act[:] = act
         steps0 = buf.sim.ist[:, 2].copy()
         buf.sim.status[resetting] = -1  # not stepped this period; zero reward
@@ -201,6 +208,12 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         infos = self._infos(np.zeros(self.num_envs), parts)
         if self._pd:  # the time-mean PD torque of the period
             infos.update(torque=buf.act.copy(), _torque=np.ones(self.num_envs, bool))
+        if self._perturb.s.push_impulse_ns is not None:
+            everyone = np.ones(self.num_envs, bool)
+            infos.update(
+                push_impulse_ns=self._perturb.push_ns.copy(), _push_impulse_ns=everyone,
+                push_dv_m_s=self._perturb.push_dv.copy(), _push_dv_m_s=everyone,
+            )  # fmt: skip
         done = np.flatnonzero(terminated | truncated)
         obs = self._observation()
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:
@@ -212,7 +225,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
                 final_info[i] = {k: infos[k][i] for k in keys}
             self._reset_slots(done)
             self._observe()
-            obs = self._observation()
+            obs[done] = self._observation(rows=done)[done]
             mask = np.zeros(self.num_envs, bool)
             mask[done] = True
             infos.update(
@@ -222,11 +235,16 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self._autoreset = terminated | truncated
         return obs, rewards, terminated, truncated, infos
 
-    def _observation(self) -> np.ndarray:
-        """The observations (with the phase and reference entries when asked for)."""
-        if self._clock is None:
-            return self._obs.copy()
-        return observations(self._obs, self._clock, self.tracking, self._proto)
+    def _observation(self, rows=None) -> np.ndarray:
+        """The observations (phase and reference entries, and noise on ``rows``: all)."""
+        obs = (
+            self._obs
+            if self._clock is None
+            else observations(self._obs, self._clock, self.tracking, self._proto)
+        )
+        rows = range(self.num_envs) if rows is None else rows
+        out = self._perturb.observe(obs, self._rngs, rows)
+        return out.copy() if out is self._obs else out
 
     def _observe(self) -> None:
         self._buf.observe()

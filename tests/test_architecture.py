@@ -38,6 +38,7 @@ LAYERS = [
     "observation",
     "reference",
     "tracking",
+    "perturbations",
     "period",
     "env",
     "vector_env",
