@@ -345,6 +345,9 @@ class ConstrainedBipedEnv(gym.Env):
             self._buf.tgt[:], self._buf.rate[:] = self.tracking.bases(1)
         self.perturbation_settings = perturbation_settings(perturbations)
         self._perturb = Perturbations(1, self.perturbation_settings, self.params, self._buf)
+        self._perturbed = self.perturbation_settings.active  # (looked up once per step)
+        self._noisy = self.perturbation_settings.obs_noise is not None
+        self._pushes = self.perturbation_settings.push_impulse_ns is not None
         self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
         self._renderer = None
         self._needs_reset = True  # until a reset succeeds, and again after a termination
@@ -405,7 +408,7 @@ class ConstrainedBipedEnv(gym.Env):
             validate_action(a, self.action_bound, self.out_of_range, self.action_bound_name)
         if self.pd_action and self.tracking.pd_follows_reference:
             buf.tgt[:1], buf.rate[:1] = self.tracking.bases(1)
-        if self.perturbation_settings.active:  # pushes due now; the delayed action
+        if self._perturbed:  # pushes due now; the delayed action
             a = self._perturb.before_period(a[None, :].astype(np.float64), [self.np_random], [0])[0]
         buf.act[0] = a  # as float64; checked (and clipped) in the compiled period
         steps0 = sim.ist[0, 2]
@@ -429,11 +432,12 @@ class ConstrainedBipedEnv(gym.Env):
             self.render()
         if self.pd_action:  # the time-mean PD torque of the period
             info["torque"] = buf.act[0].copy()
-        if self.perturbation_settings.push_impulse_ns is not None:
+        if self._pushes:
             info["push_impulse_ns"] = float(self._perturb.push_ns[0])
             info["push_dv_m_s"] = float(self._perturb.push_dv[0])
         if self._clock is None:
-            return self._observation(), reward, reason is not None, False, info
+            obs = self._observation() if self._noisy else buf.obs[0].copy()
+            return obs, reward, reason is not None, False, info
         self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
         if self.tracking is not None:
             self.tracking.after_period(sim.ist[:1, 2])

@@ -176,6 +176,7 @@ class Perturbations:
         self.has_held = np.zeros(n, bool)
         self.push_dv = np.zeros(n)
         self.push_ns = np.zeros(n)
+        self.active = settings.active
 
     def start(self, idx, rngs) -> None:
         """New episodes in rows ``idx`` (row ``idx[k]`` drawing from ``rngs[k]``)."""

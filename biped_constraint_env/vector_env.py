@@ -171,7 +171,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self._reset_slots(resetting)
         if self._pd:  # after the resets: the targets' bases at the clocks of the new starts
             buf.tgt[:], buf.rate[:] = self.tracking.bases(self.num_envs)
-        if self._perturb.s.active:  # pushes due now (stepped rows); the delayed actions
+        if self._perturb.active:  # pushes due now (stepped rows); the delayed actions
             stepped_rows = np.flatnonzero(~self._autoreset)
             act = self._perturb.before_period(act, self._rngs, stepped_rows)
         buf.act[:] = act
