@@ -276,6 +276,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--hold", action="store_true", help="hold each action through model switches")
     ap.add_argument("--compare", action="store_true", help="also run the baselines and stresses")
     ap.add_argument(
+        "--robustness", action="store_true",
+        help="also the robustness rows (pushes, reset noise, masses, K, sensor noise) and figure",
+    )  # fmt: skip
+    ap.add_argument(
         "--out",
         type=Path,
         default=None,
@@ -365,6 +369,28 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     rows = [main_row]
     if args.compare:
         rows += _rows_compare(args.run_dir, actor, batch, cfg, seeds, out_dir)
+    if args.robustness:
+        from training import robustness
+
+        if loop["policy"]:
+
+            def make():
+                return batch
+        else:
+
+            def make():
+                return controller_batch(args.controller, len(seeds))
+
+        print(f"robustness: {len(robustness.conditions(0.0))} conditions", flush=True)
+        rob = robustness.run(make, cfg.env_kwargs(), seeds, cfg.env_id, label)
+        robustness.figure(rob, out_dir / "figures" / "robustness.png",
+                          f"{label}: {len(seeds)} episodes per condition (seeds {seeds[0]}-"
+                          f"{seeds[-1]}), strict physics; in the loop: {in_the_loop}")  # fmt: skip
+        (out_dir / "robustness.json").write_text(
+            json.dumps({"seeds": seeds, "in_the_loop": in_the_loop, "rows": rob}, indent=1,
+                       default=float) + "\n"
+        )  # fmt: skip
+        rows += rob
     steps = np.array([e["steps_completed"] for e in main_row["episodes"]], dtype=float)
     dist = np.array([e["distance_m"] for e in main_row["episodes"]])
     order = np.argsort(steps + 1e-3 * dist)

@@ -169,6 +169,7 @@ def run_episodes_batched(
     live = np.ones(len(seeds), bool)
     final = {}
     steps = np.zeros(len(seeds), np.int64)
+    pushes: list[list[float]] = [[] for _ in seeds]
     step_t: list[list[float]] = [[] for _ in seeds]
     step_hip: list[list[float]] = [[] for _ in seeds]
     while live.any():
@@ -180,6 +181,9 @@ def run_episodes_batched(
         work[live] += (power * (info["t"] - t_prev))[live]
         t_prev = info["t"].copy()
         ret[live] += r[live]
+        if "push_dv_m_s" in info:
+            for i in np.flatnonzero(live & (info["push_dv_m_s"] != 0.0)):
+                pushes[i].append(float(info["push_dv_m_s"][i]))
         for i in np.flatnonzero(live & (info["steps_completed"] > steps)):
             steps[i] = info["steps_completed"][i]
             step_t[i].append(float(info["t"][i]))
@@ -208,6 +212,7 @@ def run_episodes_batched(
                 "step_t_s": step_t[i],
                 "step_hip_y_m": step_hip[i],
                 "first_step_m": math.nan,  # (the single env's run_episodes measures it)
+                "push_dv_m_s": pushes[i],  # the hip's velocity change of each push
             }
         )
     return out
