@@ -187,6 +187,9 @@ class ConstrainedBipedEnv(gym.Env):
     | pd_pose, pd_gain_scale | Fig. 2, 1.0 | | the fixed pose q1..q5 [rad]; Kp x s, Kd x sqrt(s) |
     | pd_offset | zeros | | constant offset of the PD targets q1..q5 [rad] |
     | pd_dt | min(5 ms, dt) | | physics step of the PD law [s]; divides dt (= dt: held) |
+    | perturbations | None | | dict: pushes, model error, sensor noise, action delay |
+    |  |  |  | (:mod:`.perturbations`; one kwarg for the group: eight options that only |
+    |  |  |  | robustness studies set, validated together) |
     | reference_obs | False | | append the reference's q and q-dot at the clock (12) |
     | render_mode | None | | "rgb_array" or "human" |
 
@@ -222,7 +225,8 @@ class ConstrainedBipedEnv(gym.Env):
       5 ms, or dt when shorter), in compiled code; before, the PD torque of the period's
       first state was held over the period, which ``pd_dt=dt`` keeps (at the walking task's
       5 ms both are the same law, bit for bit). Changed: ``reset(seed=...)`` refuses a seed
-      that is not an int >= 0 (a float, a bool).
+      that is not an int >= 0 (a float, a bool). Added: ``perturbations`` (pushes through the
+      constrained impulse map, per-row masses, damping and K, sensor noise, action delay).
 
     Example:
         >>> import gymnasium as gym
@@ -465,13 +469,7 @@ class ConstrainedBipedEnv(gym.Env):
     def _info(self, events, terms, reason) -> dict[str, Any]:
         """The info dict; ``terms``: the reward terms' values in REWARD_TERMS order."""
         mode, side, steps, _ = self._sim.ist[0].tolist()
-        if events:
-            switches = tuple(
-                (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
-            )
-            events = tuple((e.t, e.code.name.lower(), e.terminal) for e in events)
-        else:
-            switches = ()
+        switches, events = event_infos(events) if events else ((), ())
         forward, alive, switch, step, ctrl = terms  # REWARD_TERMS order
         return {
             "mode": mode,
@@ -512,6 +510,17 @@ class ConstrainedBipedEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def event_infos(events) -> tuple[tuple, tuple]:
+    """The ``info`` entries ``switches`` and ``events`` of a period's events (both envs).
+
+    ``switches``: (t, from, to) of each model switch; ``events``: (t, name, terminal) of each.
+    """
+    switches = tuple(
+        (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
+    )
+    return switches, tuple((e.t, e.code.name.lower(), e.terminal) for e in events)
 
 
 def make_clock_and_tracking(n: int, env: ConstrainedBipedEnv):

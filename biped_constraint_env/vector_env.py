@@ -23,6 +23,7 @@ from .env import (
     TRACK_KEYS,
     ConstrainedBipedEnv,
     draw_episode_starts,
+    event_infos,
     make_clock_and_tracking,
     observations,
     start_clocks,
@@ -42,7 +43,16 @@ MAX_NUM_ENVS = 1_000_000
 
 _MASK_KEYS = tuple(
     f"_{k}"
-    for k in ("mode", "stance_side", "steps_completed", "t", "hip_y", "termination_reason")
+    for k in (
+        "mode",
+        "stance_side",
+        "steps_completed",
+        "t",
+        "hip_y",
+        "switches",
+        "events",
+        "termination_reason",
+    )  # fmt: skip
     + REWARD_TERMS
 )
 """Gymnasium's per-key masks of the vector info (every entry is set for every env)."""
@@ -263,12 +273,15 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         keys = REWARD_TERMS + (TRACK_KEYS if self._track_reward else ())
         parts = terms if terms is not None else (zeros,) * len(keys)
         mode, side, steps = s.ist[:, :3].T.copy()  # one copy, a row per entry
+        switches, events = _event_infos(s, self.num_envs)
         info = {
             "mode": mode,
             "stance_side": side,
             "steps_completed": steps,
             "t": s.fst[:, 0].copy(),
             "hip_y": self._hip[:, 0].copy(),
+            "switches": switches,
+            "events": events,
             "termination_reason": reasons,
             **dict(zip(keys, parts, strict=True)),
         }
@@ -280,3 +293,15 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         """Nothing to release."""
+
+
+def _event_infos(sim, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per row, the single env's ``info["switches"]`` and ``info["events"]`` (object arrays)."""
+    switches = np.empty(n, dtype=object)
+    events = np.empty(n, dtype=object)
+    switches[:] = [()] * n
+    events[:] = [()] * n
+    for i in np.flatnonzero(sim.n_events[:n]):
+        sw, ev = event_infos(sim.events_of(int(i)))
+        switches[i], events[i] = sw, ev
+    return switches, events
