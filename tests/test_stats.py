@@ -40,3 +40,7 @@ def test_success_counts_complete_steps():
     s = success([25, 19, 20, 0], min_steps=20)
     assert (s["successes"], s["episodes"]) == (2, 4) and math.isclose(s["rate"], 0.5)
     assert format_success(s).startswith("50.0% [")
+
+
+def test_wilson_is_exact_at_the_ends():
+    assert wilson_interval(200, 200)[1] == 1.0 and wilson_interval(0, 200)[0] == 0.0

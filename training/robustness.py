@@ -75,8 +75,8 @@ def figure(rows: list[dict], path: Path, title: str) -> None:
         x = [p for p, _ in pts]
         y = [100 * r["success"]["rate"] for _, r in pts]
         err = [
-            [100 * (r["success"]["rate"] - r["success"]["ci95"][0]) for _, r in pts],
-            [100 * (r["success"]["ci95"][1] - r["success"]["rate"]) for _, r in pts],
+            [100 * max(0.0, r["success"]["rate"] - r["success"]["ci95"][0]) for _, r in pts],
+            [100 * max(0.0, r["success"]["ci95"][1] - r["success"]["rate"]) for _, r in pts],
         ]
         a.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=f"push {word}")
     a.set_xlabel("push impulse at the hip [N s] (≈ hip velocity change [m/s])")
@@ -87,8 +87,8 @@ def figure(rows: list[dict], path: Path, title: str) -> None:
     others = [r for r in rows if r["group"] != "push"]
     y = [100 * r["success"]["rate"] for r in others]
     err = [
-        [100 * (r["success"]["rate"] - r["success"]["ci95"][0]) for r in others],
-        [100 * (r["success"]["ci95"][1] - r["success"]["rate"]) for r in others],
+        [100 * max(0.0, r["success"]["rate"] - r["success"]["ci95"][0]) for r in others],
+        [100 * max(0.0, r["success"]["ci95"][1] - r["success"]["rate"]) for r in others],
     ]
     b.barh(range(len(others)), y, xerr=err, capsize=3, color="tab:gray")
     b.set_yticks(range(len(others)), [r["condition"] for r in others], fontsize=8)

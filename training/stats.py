@@ -24,7 +24,9 @@ def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float]:
     den = 1.0 + z * z / n
     mid = (p + z * z / (2 * n)) / den
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return max(0.0, mid - half), min(1.0, mid + half)
+    lo = 0.0 if k == 0 else min(max(0.0, mid - half), p)  # exact at the ends: 0 and 1
+    hi = 1.0 if k == n else max(min(1.0, mid + half), p)
+    return lo, hi
 
 
 def success(steps: list[int], min_steps: int = MIN_STEPS) -> dict:
