@@ -160,7 +160,7 @@ class ConstrainedBipedEnv(gym.Env):
 
     | Parameter | Default (``task="walk"``) | ``task="paper"`` | Description (unit) |
     |-----------|---------|---------|--------------------|
-    | task | "walk" | | "walk" or "paper" |
+    | task | "walk" | | "walk", "track" (learning from the reference walk) or "paper" |
     | preset | "default" | "paper" | "default" (error-controlled RK4_LIMEX), "fixed_step" |
     | | | | (RK4_LIMEX, 2.5 ms), "fast" (RK2, 5 ms), "paper" |
     | dt | 0.005 | 0.02 | control period [s] |
@@ -227,6 +227,9 @@ class ConstrainedBipedEnv(gym.Env):
       5 ms both are the same law, bit for bit). Changed: ``reset(seed=...)`` refuses a seed
       that is not an int >= 0 (a float, a bool). Added: ``perturbations`` (pushes through the
       constrained impulse map, per-row masses, damping and K, sensor noise, action delay).
+      Added: ``task="track"``, the tracking settings of the from-scratch recipe as one task
+      (``reward="tracking"``, ``rsi=0.5``, ``action="pd"``, ``pd_around="reference"``, the
+      stance-ankle ``pd_offset`` and ``phase_obs``), each still overridable.
 
     Example:
         >>> import gymnasium as gym
@@ -265,12 +268,12 @@ class ConstrainedBipedEnv(gym.Env):
         fall_hip_height_m: float | None = None,
         posture=NOMINAL_POSTURE_RAD,
         start: str | None = None,
-        phase_obs: bool = False,
-        reward: str = "env",
+        phase_obs: bool | None = None,
+        reward: str | None = None,
         reference: str | None = None,
-        rsi: float = 0.0,
-        action: str = "torque",
-        pd_around: str = "fixed",
+        rsi: float | None = None,
+        action: str | None = None,
+        pd_around: str | None = None,
         pd_range: float = PD_RANGE_RAD,
         reference_obs: bool = False,
         pd_gain_scale: float = 1.0,
@@ -286,9 +289,14 @@ class ConstrainedBipedEnv(gym.Env):
         self.params = params if params is not None else paper_biped()
         self.task = task
         settings = resolve_task(
-            task, preset=preset, dt=dt, stop_at_switch=stop_at_switch, start=start
-        )
+            task, preset=preset, dt=dt, stop_at_switch=stop_at_switch, start=start,
+            reward=reward, rsi=rsi, action=action, pd_around=pd_around, pd_offset=pd_offset,
+            phase_obs=phase_obs,
+        )  # fmt: skip
         dt, start = settings["dt"], settings["start"]
+        reward, rsi, action = settings["reward"], settings["rsi"], settings["action"]
+        pd_around, pd_offset = settings["pd_around"], settings["pd_offset"]
+        phase_obs = settings["phase_obs"]
         self.options = resolve_options(
             settings["preset"],
             dt,

@@ -30,8 +30,34 @@ PRESETS: dict[str, SimOptions] = {
 period), the accurate fixed-step "fixed_step" (RK4_LIMEX x 8 per 20 ms), the cheaper "fast"
 (RK2 x 4; fails the accuracy rule over a walking cycle) and the paper's own numerical choices."""
 
+TASK_DEFAULTS: dict[str, Any] = {
+    "reward": "env",
+    "rsi": 0.0,
+    "action": "torque",
+    "pd_around": "fixed",
+    "pd_offset": None,
+    "phase_obs": False,
+}
+"""The learning-task settings every task starts from (the env's own reward, torques)."""
+
+TRACK_PD_OFFSET_RAD = (0.2, 0.0, 0.0, 0.0, 0.0)
+"""``task="track"``'s stance-ankle offset [rad]: the smallest on a 0.05 rad grid with which a
+zero network output passes the mid-stride start's first period (docs/from_scratch.md)."""
+
 TASKS: dict[str, dict[str, Any]] = {
     "walk": {"preset": "default", "dt": 0.005, "stop_at_switch": True, "start": "midstride"},
+    "track": {
+        "preset": "default",
+        "dt": 0.005,
+        "stop_at_switch": True,
+        "start": "midstride",
+        "reward": "tracking",
+        "rsi": 0.5,
+        "action": "pd",
+        "pd_around": "reference",
+        "pd_offset": TRACK_PD_OFFSET_RAD,
+        "phase_obs": True,
+    },
     "paper": {
         "preset": "paper",
         "dt": PAPER_SAMPLE_TIME_S,
@@ -40,8 +66,12 @@ TASKS: dict[str, dict[str, Any]] = {
     },
 }
 """``task="walk"`` (default): accurate physics, 5 ms control, a period ends at each model switch
-(the torque changes there, as in the paper), mid-stride start. ``task="paper"``: the paper's
-setting (its numerics, 20 ms, torques held through switches, start at rest in model 1)."""
+(the torque changes there, as in the paper), mid-stride start. ``task="track"``: the walking
+task set up for learning from the recorded reference walk (the from-scratch recipe's task:
+tracking reward, half the starts at reference states, PD targets about the reference pose with
+the stance-ankle offset, the contact clock observed); every one of these settings can still
+be given. ``task="paper"``: the paper's setting (its numerics, 20 ms, torques held through
+switches, start at rest in model 1)."""
 
 MAX_EPISODE_STEPS = 6000
 """Time limit in control periods at registration (6000 x 5 ms = 30 s of the walking task)."""
@@ -54,7 +84,8 @@ MAX_DT_S = 1.0
 def resolve_task(task: str, **overrides: Any) -> dict[str, Any]:
     """The task's settings with the explicitly given ones (not None) on top."""
     check_choice("task", task, sorted(TASKS))
-    return {**TASKS[task], **{k: v for k, v in overrides.items() if v is not None}}
+    given = {k: v for k, v in overrides.items() if v is not None}
+    return {**TASK_DEFAULTS, **TASKS[task], **given}
 
 
 def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOptions:

@@ -101,6 +101,6 @@ def test_committed_from_scratch_policy_learned_without_a_teacher_and_walks():
     assert not available(SCRATCH, "imitation")  # no warm start of any kind
     assert cfg.reward == "tracking" and cfg.action == "pd" and cfg.rsi > 0
     kw = cfg.env_kwargs()
-    assert "rsi" not in kw and kw["preset"] == "default" and kw["start"] == "midstride"
+    assert kw["rsi"] == 0.0 and kw["preset"] == "default" and kw["start"] == "midstride"
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id)
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep

@@ -320,3 +320,18 @@ def test_start_draws_equal_numpy_uniform():
         x, y = a.uniform(-1.1, -0.9), _uniform(b, -1.1, -0.9)
         assert x == y and type(x) is type(y)
         assert np.array_equal(a.uniform(-0.01, 0.01, size=5), _uniform(b, -0.01, 0.01, 5))
+
+
+def test_the_track_task_is_the_from_scratch_recipes_settings():
+    """``task="track"``: the tracking settings as one named task, each still overridable."""
+    import gymnasium as gym
+
+    env = gym.make("ConstrainedBiped-v0", task="track").unwrapped
+    ts = env.tracking_settings
+    assert ts["reward"] == "tracking" and ts["rsi"] == 0.5 and ts["action"] == "pd"
+    assert ts["pd_around"] == "reference" and list(ts["pd_offset"]) == [0.2, 0, 0, 0, 0]
+    assert env.phase_obs and env.observation_space.shape == (26,)
+    plain = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0, action="torque").unwrapped
+    assert plain.tracking_settings["rsi"] == 0.0 and not plain.pd_action
+    walk = gym.make("ConstrainedBiped-v0").unwrapped
+    assert walk.tracking_settings["reward"] == "env" and not walk.pd_action

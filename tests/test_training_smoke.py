@@ -193,7 +193,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     run0, run1 = sorted((tmp_path / "train_ppo").iterdir())
     cfg = read_config(run0)
     assert cfg.action == "pd" and cfg.reward == "tracking" and cfg.rsi > 0
-    assert "rsi" not in cfg.env_kwargs() and cfg.train_env_kwargs()["rsi"] == cfg.rsi
+    assert cfg.env_kwargs()["rsi"] == 0.0 and cfg.train_env_kwargs()["rsi"] == cfg.rsi
     assert cfg.env_kwargs()["pd_offset"] == list(cfg.pd_offset) and cfg.pd_offset[0] > 0
     kinds = [{type(m).__name__ for m in load_policy(r)[0].modules()} for r in (run0, run1)]
     assert "Tanh" in kinds[0] and "ReLU" not in kinds[0] and "ReLU" in kinds[1]
@@ -212,7 +212,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     rows = json.loads(out.read_text())["rows"]
     assert [r["training_seed"] for r in rows] == [0, 1]
     assert rows[1]["changes"] == "rsi=0.0, activation='relu'" and "PD" in rows[0]["in_the_loop"]
-    assert all(kw["action"] == "pd" and "rsi" not in kw for kw in seen)
+    assert all(kw["action"] == "pd" and kw["rsi"] == 0.0 for kw in seen)
 
 
 def test_train_ppo_help_explains_every_setting(capsys):

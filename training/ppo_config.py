@@ -18,7 +18,8 @@ class PPOConfig:
     """PPO settings (numbers that differ from SB3's defaults say why)."""
 
     env_id: str = "ConstrainedBiped-v0"  # Gymnasium id of the env
-    task: str = "walk"  # the env's task ("walk" or "paper")
+    task: str = "walk"  # the env's task ("walk", "track" or "paper"; "track" sets the tracking
+    # fields below that are left at their defaults to the env's track task's values)
     preset: str = "default"  # the env's physics preset; evaluation uses the same
     start: str = "midstride"  # the env's start: "midstride", "rest" (Fig. 2) or "mixed" (both)
     dt: float = 0.0  # the env's control period [s] (0: the task's, 5 ms for "walk")
@@ -102,6 +103,18 @@ class PPOConfig:
     resume: str = ""  # a run directory to continue (to its own saved total)
     progress: bool = True  # progress bars
 
+    def __post_init__(self) -> None:
+        """Take the env task's learning settings where this config leaves the defaults.
+
+        The fields mirror the env's arguments (the action map and the observation size
+        depend on them), so ``task="track"`` must set them here as it does in the env.
+        """
+        from biped_constraint_env.tasks import TASK_DEFAULTS, TASKS
+
+        for name, value in TASKS.get(self.task, {}).items():
+            if name in TASK_DEFAULTS and getattr(self, name) == _BASE[name]:
+                setattr(self, name, tuple(value) if isinstance(value, tuple) else value)
+
     def validate(self) -> None:
         """Refuse a value out of its range or choices (ValueError naming the flag)."""
         for name, lo, hi in _RANGES:
@@ -164,6 +177,7 @@ class PPOConfig:
             "alive_bonus": self.alive_bonus,
             "switch_bonus": self.switch_bonus,
             "ctrl_cost_weight": self.ctrl_cost_weight,
+            "rsi": 0.0,  # evaluations start as the env does (train_env_kwargs adds the rsi)
             **({"fall_hip_height_m": self.fall_hip_height_m} if self.fall_hip_height_m > 0 else {}),
             **({"dt": self.dt} if self.dt > 0 else {}),
             **({"stop_at_switch": False} if self.hold_torques else {}),
@@ -265,6 +279,9 @@ class PPOConfig:
 
 ACTIVATIONS = ("tanh", "relu", "elu")
 
+_BASE = {"reward": "env", "rsi": 0.0, "action": "torque", "pd_around": "fixed",
+         "pd_offset": (), "phase_obs": False}  # fmt: skip
+"""The dataclass defaults of the fields a task may set (see ``PPOConfig.__post_init__``)."""
 _BIG = 10**12
 _RANGES = (  # (field, min, max): every number a config or flag may set
     ("dt", 0.0, 0.1), ("rsi", 0.0, 1.0), ("pd_range", 0.0, 3.2), ("pd_gain_scale", 0.0, 100.0),
