@@ -390,6 +390,7 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
             json.dumps({"seeds": seeds, "in_the_loop": in_the_loop, "rows": rob}, indent=1,
                        default=float) + "\n"
         )  # fmt: skip
+        print("\n" + robustness.markdown(rob), flush=True)
         rows += rob
     steps = np.array([e["steps_completed"] for e in main_row["episodes"]], dtype=float)
     dist = np.array([e["distance_m"] for e in main_row["episodes"]])

@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 PUSH_IMPULSES_NS = (0.25, 0.5, 1.0, 1.5)
-"""Push sizes [N s], each forward and backward (the hip's velocity changes by about as many
-m/s: the joints are free during the impulse; the measured change is reported per row)."""
+"""Push sizes [N s], each forward and backward. The hip's velocity changes by about 1.25 m/s
+per N s (the joints are free during the impulse), so they span about 0.3-1.9 m/s; the measured
+change is reported per row."""
 PUSH_WINDOW_S = (0.5, 10.0)
 """One push per episode, at a time drawn uniformly in this window [s]."""
 
@@ -79,7 +80,7 @@ def figure(rows: list[dict], path: Path, title: str) -> None:
             [100 * max(0.0, r["success"]["ci95"][1] - r["success"]["rate"]) for _, r in pts],
         ]
         a.errorbar(x, y, yerr=err, marker="o", capsize=3, color=color, label=f"push {word}")
-    a.set_xlabel("push impulse at the hip [N s] (≈ hip velocity change [m/s])")
+    a.set_xlabel("push impulse at the hip [N s] (the hip's velocity changes ~1.25 m/s per N s)")
     a.set_ylabel("success [%] (≥ 20 steps in 30 s), 95% CI")
     a.set_ylim(-3, 103)
     a.legend(fontsize=8)
@@ -100,3 +101,18 @@ def figure(rows: list[dict], path: Path, title: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def markdown(rows: list[dict]) -> str:
+    """The rows as a markdown table: condition, success (95% CI), mean |hip dv|, ends."""
+    from training.stats import format_success
+
+    out = [
+        "| condition | success, 95% CI | hip velocity change [m/s] | ends |",
+        "|---|---|---|---|",
+    ]
+    for r in rows:
+        dv = "" if r.get("push_dv_mean_m_s") is None else f"{r['push_dv_mean_m_s']:.2f}"
+        ends = ", ".join(f"{k} {v}" for k, v in sorted(r["ends"].items(), key=lambda x: -x[1]))
+        out.append(f"| {r['condition']} | {format_success(r['success'])} | {dv} | {ends} |")
+    return "\n".join(out)
