@@ -169,3 +169,15 @@ def test_smallest_step_tolerance_finishes_a_period():
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(5))
     assert info["t"] > 0
+
+
+@pytest.mark.parametrize("seed", [1.5, True, -1, "3", [1, 2.5]])
+def test_reset_refuses_a_seed_that_is_not_an_int(seed):
+    import gymnasium as gym
+
+    venv = gym.make_vec("ConstrainedBiped-v0", 2, vectorization_mode="vector_entry_point")
+    with pytest.raises(ValueError, match="seed"):
+        venv.reset(seed=seed)
+    if not isinstance(seed, list):
+        with pytest.raises(ValueError, match="seed"):
+            gym.make("ConstrainedBiped-v0").reset(seed=seed)
