@@ -344,6 +344,26 @@ def _controller_loop(args) -> dict:
             "what": "a model controller"}  # fmt: skip
 
 
+def _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir) -> list[dict]:
+    """The ``--robustness`` rows, written with their figure into ``out_dir``."""
+    from training import robustness
+
+    def make():  # a fresh batch actor per condition (controllers keep per-episode phases)
+        return batch if loop["policy"] else controller_batch(args.controller, len(seeds))
+
+    print(f"robustness: {len(robustness.conditions(0.0))} conditions", flush=True)
+    rob = robustness.run(make, cfg.env_kwargs(), seeds, cfg.env_id, label)
+    title = (
+        f"{label}: {len(seeds)} episodes per condition (seeds {seeds[0]}-{seeds[-1]}), strict "
+        f"physics; in the loop: {in_the_loop}"
+    )
+    robustness.figure(rob, out_dir / "figures" / "robustness.png", title)
+    summary = {"seeds": seeds, "in_the_loop": in_the_loop, "rows": rob}
+    (out_dir / "robustness.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+    print("\n" + robustness.markdown(rob), flush=True)
+    return rob
+
+
 def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     """Run the rows and write the outputs into ``out_dir`` (a fresh temporary directory)."""
     from training.model_controller import controller_from
@@ -370,28 +390,7 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     if args.compare:
         rows += _rows_compare(args.run_dir, actor, batch, cfg, seeds, out_dir)
     if args.robustness:
-        from training import robustness
-
-        if loop["policy"]:
-
-            def make():
-                return batch
-        else:
-
-            def make():
-                return controller_batch(args.controller, len(seeds))
-
-        print(f"robustness: {len(robustness.conditions(0.0))} conditions", flush=True)
-        rob = robustness.run(make, cfg.env_kwargs(), seeds, cfg.env_id, label)
-        robustness.figure(rob, out_dir / "figures" / "robustness.png",
-                          f"{label}: {len(seeds)} episodes per condition (seeds {seeds[0]}-"
-                          f"{seeds[-1]}), strict physics; in the loop: {in_the_loop}")  # fmt: skip
-        (out_dir / "robustness.json").write_text(
-            json.dumps({"seeds": seeds, "in_the_loop": in_the_loop, "rows": rob}, indent=1,
-                       default=float) + "\n"
-        )  # fmt: skip
-        print("\n" + robustness.markdown(rob), flush=True)
-        rows += rob
+        rows += _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir)
     steps = np.array([e["steps_completed"] for e in main_row["episodes"]], dtype=float)
     dist = np.array([e["distance_m"] for e in main_row["episodes"]])
     order = np.argsort(steps + 1e-3 * dist)
