@@ -136,11 +136,11 @@ def test_torque_actions_reproduce_the_recorded_trajectories():
         assert np.array_equal(np.concatenate([obs, r[:, None]], 1), want)
 
 
-def test_the_sb3_adapter_passes_pd_targets_through():
-    """An SB3 action of 1.0 is the env's PD action 1.0, not 150 clipped to 1."""
+@pytest.mark.parametrize("kw", [{"action": "pd", "start": "rest"}, {"task": "track"}])
+def test_the_sb3_adapter_passes_pd_targets_through(kw):
+    """An SB3 action of 0.5 is the env's PD action 0.5, not 75 clipped to 1."""
     from training.sb3_vec import make_sb3_vec_env
 
-    kw = {"action": "pd", "start": "rest"}
     venv = make_sb3_vec_env(2, 0, kw, "batched")
     venv.reset()
     venv.step_async(np.full((2, 5), 0.5, np.float32))

@@ -73,7 +73,8 @@ def make_sb3_vec_env(
     ``vec="batched"``: the batched vector env (all simulators in one compiled call) behind
     :class:`BatchedSB3VecEnv`; ``"subproc"``: SB3's SubprocVecEnv of single envs;
     ``"dummy"``: DummyVecEnv (one process). ``action_map``: an :class:`ActionMap` (default:
-    plain rescaling by the torque limit; with ``action="pd"`` in ``env_kwargs``, the identity:
+    plain rescaling by the torque limit; with PD-target actions (``action="pd"`` or a task
+    that sets it, as ``task="track"``), the identity:
     the env's actions are PD targets in [-1, 1] already). ``num_threads``: numba threads of
     the batched env (1 next to a torch process on 2 cores; see the vector env).
     ``max_episode_steps``: the episodes' time limit in control periods (None: the
@@ -82,9 +83,11 @@ def make_sb3_vec_env(
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import biped_constraint_env  # noqa: F401
+    from biped_constraint_env.tasks import resolve_task
 
     limit = float(env_kwargs.get("torque_limit_nm", TORQUE_LIMIT_NM))
-    if env_kwargs.get("action") == "pd":  # the env's actions are PD targets in [-1, 1]
+    task = resolve_task(env_kwargs.get("task", "walk"), action=env_kwargs.get("action"))
+    if task["action"] == "pd":  # the env's actions are PD targets in [-1, 1] (task "track" too)
         if action_map is not None and (action_map.base is not None or action_map.limit != 1.0):
             raise ValueError("PD-target actions take ActionMap(1.0, None, 1.0): no gear, no base")
         action_map = action_map or ActionMap(1.0, None, 1.0)
