@@ -37,7 +37,7 @@ def evaluate(model, env, episodes: int = 200, first_seed: int = 500_000) -> dict
     return success([e["steps_completed"] for e in eps])
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # python examples/train_sb3.py [ENV_STEPS [SEED]]
     steps = int(sys.argv[1]) if len(sys.argv) > 1 else 12_000_000
-    model, env = train(steps)
+    model, env = train(steps, seed=int(sys.argv[2]) if len(sys.argv) > 2 else 0)
     print("success (>= 20 steps in 30 s), 95% CI:", format_success(evaluate(model, env)))
