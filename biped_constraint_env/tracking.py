@@ -145,8 +145,10 @@ class Tracking:
         self.kd = PD_KD * np.sqrt(settings["pd_gain_scale"])
         self.ref: Reference | None = None
         self.first = np.zeros(n, bool)  # in the reference's first step from its own start
+        self._per = 1.0  # reference periods per control period (its clock is in its periods)
         if settings["needs_reference"]:
             self.ref = load_reference(settings["reference"])
+            self._per = clock.dt / self.ref.dt if clock.dt != self.ref.dt else 1.0
             tables = self.ref.tables
             self._rows = np.concatenate([tables[k] for k in sorted(tables)])
             self._offset = np.zeros((2, 5), np.int64)
@@ -165,7 +167,12 @@ class Tracking:
         c = self.clock
         f = self.first.astype(np.int64)
         m = c.mode
-        return self._rows[self._offset[f, m] + np.minimum(c.j, self._len[f, m] - 1)]
+        j = c.j if self._per == 1.0 else np.rint(c.j * self._per).astype(np.int64)
+        return self._rows[self._offset[f, m] + np.minimum(j, self._len[f, m] - 1)]
+
+    def _env_periods(self, rows: np.ndarray) -> np.ndarray:
+        """Reference rows (its periods since a model began) as the env's control periods."""
+        return rows if self._per == 1.0 else np.rint(rows / self._per).astype(np.int64)
 
     def draw_starts(self, params, options, sim, idx, rngs, start, posture, noise) -> None:
         """Start slots ``idx`` (slot ``idx[k]`` drawing from ``rngs[k]``) and their clocks.
@@ -197,7 +204,7 @@ class Tracking:
         self.first[idx] = self.clock.first[idx] == (self.ref.start == "rest")
         if on_ref.any():
             self.clock.first[slots] = ref.first[r].astype(bool)
-            self.clock.j[slots] = ref.j[r]
+            self.clock.j[slots] = self._env_periods(ref.j[r])
             self.first[slots] = ref.step[r] == 0
         self.place(idx[own], sim)
 
@@ -226,7 +233,7 @@ class Tracking:
             o, n = self._offset[0, m], self._len[0, m]
             table = self._rows[o : o + n, :N_LINKS]
             d = np.sum((sim.q[slots][:, None, :] - table[None, :, :]) ** 2, axis=2)
-            c.j[slots] = np.argmin(d, axis=1)
+            c.j[slots] = self._env_periods(np.argmin(d, axis=1))
 
     # ------------------------------------------------------------------ actions
     def bases(self, n: int) -> tuple[np.ndarray, np.ndarray]:

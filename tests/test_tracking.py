@@ -223,3 +223,21 @@ def test_default_env_is_unchanged_by_the_tracking_options_defaults():
 def test_bad_tracking_options_are_refused_by_name(kw, name):
     with pytest.raises(ValueError, match=name):
         ConstrainedBipedEnv(**kw)
+
+
+def test_the_reference_clock_counts_its_own_periods_at_any_control_period():
+    """At dt = 20 ms the clock's j periods are 4 j of the 5 ms reference's rows."""
+    import gymnasium as gym
+
+    fine = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0).unwrapped
+    coarse = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0, dt=0.02).unwrapped
+    for env in (fine, coarse):
+        env.reset(seed=0)
+    tf, tc = fine.tracking, coarse.tracking
+    assert tc._per == 4.0 and tf._per == 1.0
+    for j in (0, 3, 10):
+        tf.clock.j[:] = 4 * j
+        tc.clock.j[:] = j
+        tf.clock.mode[:] = tc.clock.mode[:] = 2
+        tf.first[:] = tc.first[:] = False
+        np.testing.assert_array_equal(tf.rows(), tc.rows())
