@@ -193,6 +193,11 @@ class ConstrainedBipedEnv(gym.Env):
     | reference_obs | False | | append the reference's q and q-dot at the clock (12) |
     | render_mode | None | | "rgb_array" or "human" |
 
+    ## Learning
+    The walking task's feasible set is thin: random or zero torques end an episode in its first
+    period (``stance_toe_pulls``), so SB3's defaults learn nothing on it. ``task="track"`` sets
+    up the task that PPO learns from a random network (docs/sb3.md, a plain-SB3 script).
+
     ## Tracking task
     Options for learning from a reference walk (:mod:`.tracking`; the default env uses none):
     ``reward="tracking"`` is a DeepMimic-style sum of exponential kernels of the pose, rate, hip
