@@ -231,30 +231,25 @@ def make_run_dir(
     return run
 
 
-def int_in(lo: int, hi: int):
-    """An argparse type: an integer in [lo, hi] (argparse names the flag in its refusal)."""
-
-    def parse(text: str) -> int:
-        v = int(text)
-        if not lo <= v <= hi:
+def _number_in(kind: type, name: str, lo, hi):
+    def parse(text: str):
+        v = kind(text)
+        if not lo <= v <= hi:  # False for NaN too
             raise argparse.ArgumentTypeError(f"must be in [{lo}, {hi}], got {v}")
         return v
 
-    parse.__name__ = "integer"
+    parse.__name__ = name  # argparse's "invalid NAME value" and its refusal name the flag
     return parse
+
+
+def int_in(lo: int, hi: int):
+    """An argparse type: an integer in [lo, hi]."""
+    return _number_in(int, "integer", lo, hi)
 
 
 def float_in(lo: float, hi: float):
     """An argparse type: a number in [lo, hi] (NaN refused)."""
-
-    def parse(text: str) -> float:
-        v = float(text)
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"must be in [{lo}, {hi}], got {v}")
-        return v
-
-    parse.__name__ = "number"
-    return parse
+    return _number_in(float, "number", lo, hi)
 
 
 @contextlib.contextmanager
