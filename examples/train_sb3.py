@@ -12,7 +12,7 @@ from training.sb3_vec import make_sb3_vec_env
 from training.stats import format_success, success
 
 
-def train(total_timesteps: int = 12_000_000, seed: int = 0):
+def train(total_timesteps: int = 12_000_000, seed: int = 0, progress_bar: bool = True):
     """PPO from a random network on the track task; returns (model, its VecNormalize env)."""
     torch.set_num_threads(1)  # the batched env takes the other core
     env = make_sb3_vec_env(64, seed, {"task": "track"}, max_episode_steps=1000)  # 5 s episodes
@@ -22,7 +22,7 @@ def train(total_timesteps: int = 12_000_000, seed: int = 0):
         learning_rate=LinearSchedule(3e-4, 0.0, 1.0), policy_kwargs={"net_arch": [128, 128]},
     )  # fmt: skip
     model.policy.log_std.data[:] = torch.tensor([-5.0, -4.0, -4.0, -3.5, -3.0])  # per joint
-    model.learn(total_timesteps, progress_bar=True)
+    model.learn(total_timesteps, progress_bar=progress_bar)
     return model, env
 
 

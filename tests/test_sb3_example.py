@@ -19,7 +19,7 @@ def test_the_example_trains_and_evaluates():
     spec = importlib.util.spec_from_file_location("train_sb3", EXAMPLE)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    model, env = mod.train(total_timesteps=64, seed=0)  # one rollout of 64 x 64 env steps
+    model, env = mod.train(64, seed=0, progress_bar=False)  # one rollout of 64 x 64 env steps
     assert model.num_timesteps >= 64 * 64
     s = mod.evaluate(model, env, episodes=2)
     assert s["episodes"] == 2 and 0.0 <= s["rate"] <= 1.0
