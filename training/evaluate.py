@@ -358,8 +358,9 @@ def _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir)
         f"physics; in the loop: {in_the_loop}"
     )
     robustness.figure(rob, out_dir / "figures" / "robustness.png", title)
-    summary = {"seeds": seeds, "in_the_loop": in_the_loop, "rows": rob}
-    (out_dir / "robustness.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+    summary = {"seeds": seeds, "in_the_loop": in_the_loop, "rows": robustness.compact(rob)}
+    text = json.dumps(summary, default=float).replace('{"group"', '\n{"group"')
+    (out_dir / "robustness.json").write_text(text + "\n")
     print("\n" + robustness.markdown(rob), flush=True)
     return rob
 

@@ -60,6 +60,20 @@ def run(make_actor, env_kwargs: dict, seeds, env_id: str, label: str) -> list[di
     return rows
 
 
+EPISODE_FIELDS = ("seed", "steps_completed", "distance_m", "end")
+"""What ``robustness.json`` keeps of each episode (the rows keep their summaries)."""
+
+
+def compact(rows: list[dict]) -> list[dict]:
+    """The rows for ``robustness.json``: each episode as [seed, steps, distance, end]."""
+    return [
+        {**{k: v for k, v in r.items() if k != "episodes"},
+         "episode_fields": list(EPISODE_FIELDS),
+         "episodes": [[e[k] for k in EPISODE_FIELDS] for e in r["episodes"]]}
+        for r in rows
+    ]  # fmt: skip
+
+
 def figure(rows: list[dict], path: Path, title: str) -> None:
     """Success against push size (forward, backward) and a panel of the other conditions."""
     from training.plots import _mpl
