@@ -136,7 +136,7 @@ PD_EPISODES = 200
 def pd_episodes(dt: float, pd_dt: float, seeds) -> list[np.ndarray]:
     """Each seed's episode of PD targets at the rest pose (zero action), from rest, as the
     torques the PD law applied in each period (``info["torque"]``)."""
-    env = gym.make("ConstrainedBiped-v0", action="pd", dt=dt, pd_dt=pd_dt, start="rest")
+    env = gym.make("ConstrainedBiped-v0", action={"kind": "pd", "dt": pd_dt}, dt=dt, start="rest")
     out = []
     for seed in seeds:
         env.reset(seed=seed)
@@ -181,10 +181,10 @@ def pd_cost(rounds: int) -> None:
             seeds, 0.005, held5
         ),
         "PD targets held 20 ms, the PD law every 5 ms": lambda: us_per_sim_second(
-            seeds, 0.02, action="pd", pd_dt=0.005
+            seeds, 0.02, action={"kind": "pd", "dt": 0.005}
         ),
         "PD targets held 20 ms, the PD law every 1 ms": lambda: us_per_sim_second(
-            seeds, 0.02, action="pd", pd_dt=0.001
+            seeds, 0.02, action={"kind": "pd", "dt": 0.001}
         ),
     }
     best = {label: np.inf for label in rows}

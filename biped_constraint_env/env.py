@@ -1,58 +1,27 @@
 """ConstrainedBiped-v0: a thin Gymnasium adapter over the four-model hybrid simulator.
 
-The physics lives in :mod:`.simulator`; the action check in :mod:`.actions`, the observation
-in :mod:`.observation`, starts in :mod:`.starts`, rewards in :mod:`.rewards` and the task
-settings in :mod:`.tasks`, all shared with the batched :mod:`.vector_env`.
+The physics lives in :mod:`.simulator`; the settings are validated once in :mod:`.settings`
+and everything around the compiled period is :mod:`.core`'s, shared with the batched
+:mod:`.vector_env` (this env is its one-row case): this module adds Gymnasium's single-env API
+and rendering.
 """
 
 from __future__ import annotations
 
-import inspect
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .actions import (
-    PD_BOUND,
-    TORQUE_ACTIONS,
-    TORQUE_LIMIT_NM,
-    action_config,
-    check_action_settings,
-    check_pd_dt,
-    validate_action,
-)
-from .clock import ContactClock
-from .model import N_ACTUATED, BipedParams, paper_biped
-from .modes import EventCode
-from .observation import observation_space
-from .period import EnvBuffers
-from .perturbations import Perturbations, perturbation_settings
-from .rewards import (
-    REWARD_TERMS,
-    TERMINATION_FALL,
-    TERMINATION_NON_FINITE,
-    check_fall_height,
-    reward_config,
-    reward_weights,
-)
-from .simulator import SimState, evaluate, keypoints
-from .starts import (
-    NOMINAL_POSTURE_RAD,
-    RESET_NOISE_SCALE_RAD,
-    check_start_settings,
-    check_start_state,
-    draw_starts,
-    state_from_options,
-)
-from .state import STATUS_NONFINITE, STATUS_TERMINATED
-from .tasks import resolve_options, resolve_task
-from .tracking import PD_RANGE_RAD, TRACKING_TERMS, Tracking, check_tracking_settings
-from .validation import check_bool, check_names, check_seeds
-
-TRACK_KEYS = tuple(f"track_{t}" for t in TRACKING_TERMS)
-"""The tracking reward's terms in ``info`` (``reward="tracking"``)."""
+from .actions import validate_action
+from .core import EnvCore
+from .model import N_ACTUATED
+from .settings import ENV_ARGUMENTS as SETTINGS_ARGUMENTS
+from .settings import make_settings
+from .simulator import SimState, keypoints
+from .starts import state_from_options
+from .validation import check_seeds
 
 
 class ConstrainedBipedEnv(gym.Env):
@@ -154,9 +123,11 @@ class ConstrainedBipedEnv(gym.Env):
     of the walking task; 120 s with ``task="paper"``'s 20 ms).
 
     ## Arguments
-    Every argument is validated (a ``ValueError`` names it). ``task`` sets the defaults of
-    ``preset``, ``dt``, ``stop_at_switch`` and ``start`` (:data:`~.tasks.TASKS`); each given
-    explicitly overrides the task's value.
+    Every argument is validated once, into ``env.settings`` (:mod:`.settings`: physics, task,
+    start, action, reward, observation, perturbations; printed by ``repr(env)``); a
+    ``ValueError`` names a wrong one. ``task`` sets the defaults of ``preset``, ``dt``,
+    ``stop_at_switch`` and ``start`` (:data:`~.tasks.TASKS`; ``"track"`` also the learning
+    settings below); each given explicitly overrides the task's value.
 
     | Parameter | Default (``task="walk"``) | ``task="paper"`` | Description (unit) |
     |-----------|---------|---------|--------------------|
@@ -172,21 +143,22 @@ class ConstrainedBipedEnv(gym.Env):
     | params | paper_biped() | | the robot (``BipedParams``) |
     | torque_limit_nm | 150 | | action bound [N m] |
     | out_of_range | "clip" | | "clip" or "raise" |
-    | forward_reward_weight, alive_bonus, switch_bonus, | 1, 0.5, 1, | | reward weights |
-    | step_bonus, ctrl_cost_weight | 5, 0.1 | | (Rewards) |
+    | forward_reward_weight, alive_bonus, switch_bonus, | 1, 0.5, 1, | | the "env" reward's |
+    | step_bonus, ctrl_cost_weight | 5, 0.1 | | weights (Rewards) |
     | reset_noise_scale | 0.01 | | uniform noise on q1..q5 [rad] |
     | fall_hip_height_m | None | | end the episode when the hip is below [m] |
     | posture | NOMINAL_POSTURE_RAD | | start posture of ``start="rest"`` [rad] |
     | phase_obs | False | | append the contact clock's phase (below) to the observation |
-    | reward | "env" | | "env" (Rewards) or "tracking" (a reference walk's; below) |
+    | reward | "env" | | "env" (Rewards), "tracking" (a reference walk's; below) or |
+    | | | | {"kind", "weights", "kernels"}: any term's weight or kernel (:mod:`.rewards`) |
     | reference | None | | the reference walk: "midstride", "rest" or an npz path |
     | | | | (None: "rest" for the rest and mixed starts, else "midstride") |
     | rsi | 0.0 | | fraction of resets at reference states (reference-state starts) |
-    | action | "torque" | | "torque" or "pd": PD targets in [-1, 1]^5 (below) |
-    | pd_around, pd_range | "fixed", 1.0 | | targets about ``pd_pose`` or the reference [rad] |
-    | pd_pose, pd_gain_scale | Fig. 2, 1.0 | | the fixed pose q1..q5 [rad]; Kp x s, Kd x sqrt(s) |
-    | pd_offset | zeros | | constant offset of the PD targets q1..q5 [rad] |
-    | pd_dt | min(5 ms, dt) | | physics step of the PD law [s]; divides dt (= dt: held) |
+    | action | "torque" | | "torque", "pd" (PD targets in [-1, 1]^5, below) or a dict: |
+    | | | | {"kind": "pd", "around": "fixed" or "reference", "range": 1.0 [rad], |
+    | | | | "pose": Fig. 2 q1..q5 [rad], "offset": zeros [rad], "gain_scale": 1.0 |
+    | | | | (Kp x s, Kd x sqrt(s)), "dt": min(5 ms, dt), the PD law's physics step [s], |
+    | | | | dividing dt; = dt holds the PD torque} (one kwarg: only PD reads them) |
     | perturbations | None | | dict: pushes, model error, sensor noise, action delay |
     |  |  |  | (:mod:`.perturbations`; one kwarg for the group: eight options that only |
     |  |  |  | robustness studies set, validated together) |
@@ -202,11 +174,11 @@ class ConstrainedBipedEnv(gym.Env):
     Options for learning from a reference walk (:mod:`.tracking`; the default env uses none):
     ``reward="tracking"`` is a DeepMimic-style sum of exponential kernels of the pose, rate, hip
     height and hip speed errors against the reference at the contact clock, plus 1 per
-    completed step (``info["track_<term>"]``); ``rsi`` starts that fraction of the episodes at
+    completed step (``info["reward_<term>"]``); ``rsi`` starts that fraction of the episodes at
     recorded reference states; ``action="pd"`` makes the action five joint targets, tracked by
     the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains ``PD_KP``, ``PD_KD``: the
     targets hold over the control period and the law, clipped to the torque limit, is evaluated
-    at every physics step ``pd_dt`` inside it, as legged-robot envs do (decimation; 20 ms
+    at every physics step ``action["dt"]`` inside it, as legged-robot envs do (decimation; 20 ms
     periods apply their targets through four 5 ms PD updates). ``info["torque"]`` gives the
     period's time-mean torque; the control cost is the time mean of sum(tau^2).
     ``reference_obs`` shows the reference to the policy. The clock restarts at every model
@@ -235,6 +207,15 @@ class ConstrainedBipedEnv(gym.Env):
       Added: ``task="track"``, the tracking settings of the from-scratch recipe as one task
       (``reward="tracking"``, ``rsi=0.5``, ``action="pd"``, ``pd_around="reference"``, the
       stance-ankle ``pd_offset`` and ``phase_obs``), each still overridable.
+      Changed: the PD mapping's settings are one ``action`` dict (``pd_around``,
+      ``pd_range``, ``pd_pose``, ``pd_offset``, ``pd_gain_scale`` and ``pd_dt`` became its
+      ``around``, ``range``, ``pose``, ``offset``, ``gain_scale`` and ``dt``); ``reward``
+      takes a dict of weights and kernels (:data:`~.rewards.REWARD_KINDS`); ``info`` gives the
+      terms of the env's own reward kind as ``reward_<term>``, which add up to the reward
+      (the tracking reward's were ``track_<term>``, beside walking terms that did not add up);
+      the walking weights with another reward kind are refused. The single and the batched
+      env share one core (:mod:`.core`), so their ``info`` keys and values are equal
+      (the PD torque and pushes appear in the reset's ``info`` too, zero).
 
     Example:
         >>> import gymnasium as gym
@@ -247,140 +228,36 @@ class ConstrainedBipedEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 50}
 
-    def __init__(
-        self,
-        params: BipedParams | None = None,
-        task: str = "walk",
-        preset: str | None = None,
-        dt: float | None = None,
-        integrator: str | None = None,
-        substeps: int | None = None,
-        impact: str | None = None,
-        locate_events: bool | None = None,
-        jdot: str | None = None,
-        strict: bool | None = None,
-        heel_force_includes_foot_weight: bool | None = None,
-        step_tol: float | None = None,
-        stop_at_switch: bool | None = None,
-        torque_limit_nm: float = TORQUE_LIMIT_NM,
-        out_of_range: str = "clip",
-        forward_reward_weight: float = 1.0,
-        alive_bonus: float = 0.5,
-        switch_bonus: float = 1.0,
-        step_bonus: float = 5.0,
-        ctrl_cost_weight: float = 0.1,
-        reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
-        fall_hip_height_m: float | None = None,
-        posture=NOMINAL_POSTURE_RAD,
-        start: str | None = None,
-        phase_obs: bool | None = None,
-        reward: str | None = None,
-        reference: str | None = None,
-        rsi: float | None = None,
-        action: str | None = None,
-        pd_around: str | None = None,
-        pd_range: float = PD_RANGE_RAD,
-        reference_obs: bool = False,
-        pd_gain_scale: float = 1.0,
-        pd_pose=None,
-        pd_offset=None,
-        pd_dt: float | None = None,
-        perturbations: dict[str, Any] | None = None,
-        render_mode: str | None = None,
-        **unknown: Any,
-    ):
+    def __init__(self, render_mode: str | None = None, **kwargs: Any):
         """Create the environment (see the class docstring, Arguments)."""
-        check_names("argument(s) of ConstrainedBiped-v0", unknown, ENV_ARGUMENTS)
-        self.params = params if params is not None else paper_biped()
-        self.task = task
-        settings = resolve_task(
-            task, preset=preset, dt=dt, stop_at_switch=stop_at_switch, start=start,
-            reward=reward, rsi=rsi, action=action, pd_around=pd_around, pd_offset=pd_offset,
-            phase_obs=phase_obs,
-        )  # fmt: skip
-        dt, start = settings["dt"], settings["start"]
-        reward, rsi, action = settings["reward"], settings["rsi"], settings["action"]
-        pd_around, pd_offset = settings["pd_around"], settings["pd_offset"]
-        phase_obs = settings["phase_obs"]
-        self.options = resolve_options(
-            settings["preset"],
-            dt,
-            dict(
-                integrator=integrator,
-                substeps=substeps,
-                impact=impact,
-                locate_events=locate_events,
-                jdot=jdot,
-                strict=strict,
-                heel_force_includes_foot_weight=heel_force_includes_foot_weight,
-                step_tol=step_tol,
-                stop_at_switch=settings["stop_at_switch"],
-            ),
-        )
-        self.dt = float(dt)
-        self.torque_limit_nm, self.out_of_range = check_action_settings(
-            torque_limit_nm, out_of_range
-        )
-        self.weights = reward_weights(
-            forward_reward_weight, alive_bonus, switch_bonus, step_bonus, ctrl_cost_weight
-        )
-        self.fall_hip_height_m = check_fall_height(fall_hip_height_m)
-        self.start, self.posture, self.reset_noise_scale = check_start_settings(
-            self.params, start, posture, reset_noise_scale
-        )
+        self.settings = make_settings(**kwargs)
+        s = self.settings
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
         self.render_mode = render_mode
-        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
-        self.tracking_settings = check_tracking_settings(
-            self.start, reward, reference, rsi, action, pd_around, pd_range, reference_obs,
-            pd_gain_scale, pd_pose, pd_offset,
-        )  # fmt: skip
-        ts = self.tracking_settings
-        self.pd_action = ts["action"] == "pd"
-        self.action_bound = 1.0 if self.pd_action else self.torque_limit_nm
-        self.action_bound_name = PD_BOUND if self.pd_action else "torque limit"
-        bound = self.action_bound
-        self.action_space = spaces.Box(-bound, bound, (N_ACTUATED,), np.float32)
-        self.phase_obs = check_bool("phase_obs", phase_obs)
-        self.reference_obs = ts["reference_obs"]
-        self.observation_space = observation_space(self.phase_obs, self.reference_obs)
-        self.pd_substeps = check_pd_dt(pd_dt, self.dt) if self.pd_action else 0
-        self._clock, self.tracking = make_clock_and_tracking(1, self)
-        self._buf = EnvBuffers(
-            1,
-            self.params,
-            self.options,
-            self.dt,
-            reward_config(self.weights, self.torque_limit_nm, self.fall_hip_height_m),
-            action_config(self.action_bound, self.out_of_range),
-            pcfg=self.action_mapping(),
-        )
-        if self.pd_action:  # constant bases about a fixed pose: set once
-            self._buf.tgt[:], self._buf.rate[:] = self.tracking.bases(1)
-        self.perturbation_settings = perturbation_settings(perturbations)
-        self._perturb = Perturbations(1, self.perturbation_settings, self.params, self._buf)
-        self._perturbed = self.perturbation_settings.active  # (looked up once per step)
-        self._noisy = self.perturbation_settings.obs_noise is not None
-        self._pushes = self.perturbation_settings.push_impulse_ns is not None
-        self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
+        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / s.dt))}
+        self.params, self.options, self.dt = s.physics.params, s.physics.options, s.dt
+        self.task = s.task
+        self.core = EnvCore(s, 1)
+        a = s.action.bound
+        self.action_space = spaces.Box(-a, a, (N_ACTUATED,), np.float32)
+        self.observation_space = self.core.observation_space
+        self._act = self.core.buf.act
+        self._rows = np.zeros(1, np.int64)
         self._renderer = None
         self._needs_reset = True  # until a reset succeeds, and again after a termination
-        self._track_reward = self.tracking_settings["reward"] == "tracking"
 
-    def action_mapping(self) -> np.ndarray:
-        """The compiled period's action mapping (:func:`~.actions.pd_config`)."""
-        if not self.pd_action:
-            return TORQUE_ACTIONS
-        return self.tracking.pd_config(self.pd_substeps)
+    def __repr__(self) -> str:
+        """The env with its settings."""
+        return f"ConstrainedBipedEnv({self.settings!r})"
 
     # ---------------------------------------------------------------- state access
     @property
     def state(self) -> SimState:
         """The simulator state (immutable snapshot)."""
-        return self._sim.get(0)
+        return self.core.sim.get(0)
 
     def keypoints(self) -> dict[str, np.ndarray]:
         """World positions [m] of toes, heels, ankles, knees and hip of both legs, by name."""
@@ -393,112 +270,37 @@ class ConstrainedBipedEnv(gym.Env):
             check_seeds(seed, 1)  # an int >= 0: not a float, a bool or a list
         super().reset(seed=seed)
         self._needs_reset = True  # stays so if this reset is refused
-        slot = np.zeros(1, np.int64)
+        rngs = self._rngs = [self.np_random]  # this episode's generator (seeded above)
         if options is not None and not (isinstance(options, dict) and not options):
-            state = state_from_options(options)
-            check_start_state(self.params, state)
-            forces = evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
-            self._sim.set(0, state, forces)
-            start_clocks(self._clock, self.tracking, slot, self._sim)
+            self.core.set_starts(self._rows, state_from_options(options), rngs)
         else:
-            draw_episode_starts(self, self._sim, slot, [self.np_random], self._clock, self.tracking)
-        self._perturb.start(slot, [self.np_random])
+            self.core.draw_starts(self._rows, rngs)
+        self.core.buf.observe()
+        self.core.clear_period()
         self._needs_reset = False
-        self._observe()
-        info = self._info((), (0.0,) * len(REWARD_TERMS), None)
-        if self._track_reward:
-            info.update(dict.fromkeys(TRACK_KEYS, 0.0))
+        info = self.core.info(0)
         if self.render_mode == "human":
             self.render()
-        return self._observation(), info
+        return self.core.observation(rngs)[0], info
 
     def step(self, action):
-        """Apply the torques for one control period (see the class docstring)."""
+        """Apply the action for one control period (see the class docstring)."""
+        if self._needs_reset:
+            raise RuntimeError(
+                "step() called before reset() or after the episode ended; call reset()"
+            )
         a = action if isinstance(action, np.ndarray) else np.asarray(action)
-        buf = self._buf
-        sim = buf.sim
-        if self._needs_reset or a.shape != (N_ACTUATED,) or a.dtype.kind not in "fiu":
-            if self._needs_reset:
-                raise RuntimeError(
-                    "step() called before reset() or after the episode ended; call reset()"
-                )
-            validate_action(a, self.action_bound, self.out_of_range, self.action_bound_name)
-        if self.pd_action and self.tracking.pd_follows_reference:
-            buf.tgt[:1], buf.rate[:1] = self.tracking.bases(1)
-        if self._perturbed:  # pushes due now; the delayed action
-            a = self._perturb.before_period(a[None, :].astype(np.float64), [self.np_random], [0])[0]
-        buf.act[0] = a  # as float64; checked (and clipped) in the compiled period
-        steps0 = sim.ist[0, 2]
-        if buf.period():
-            validate_action(a, self.action_bound, self.out_of_range, self.action_bound_name)
-            raise AssertionError(f"the compiled action check refused {a}, validate_action not")
-        status = sim.status[0]
-        events = sim.events_of(0) if sim.n_events[0] else ()
-        reason = None
-        if status == STATUS_TERMINATED:
-            reason = next(e.code.name.lower() for e in events if e.terminal)
-        elif status == STATUS_NONFINITE:
-            reason = TERMINATION_NON_FINITE
-        elif buf.fell[0]:
-            reason = TERMINATION_FALL
-        *terms, reward = buf.rew[0].tolist()
-        info = self._info(events, terms, reason)
-        if reason is not None:
-            self._needs_reset = True
+        if a.shape != (N_ACTUATED,) or a.dtype.kind not in "fiu":
+            act = self.settings.action
+            validate_action(a, act.bound, act.out_of_range, act.bound_name)
+        rngs = self._rngs
+        rewards, terminated = self.core.period(a[None, :], rngs)
+        info = self.core.info(0)
+        done = bool(terminated[0])
+        self._needs_reset = done
         if self.render_mode == "human":
             self.render()
-        if self.pd_action:  # the time-mean PD torque of the period
-            info["torque"] = buf.act[0].copy()
-        if self._pushes:
-            info["push_impulse_ns"] = float(self._perturb.push_ns[0])
-            info["push_dv_m_s"] = float(self._perturb.push_dv[0])
-        if self._clock is None:
-            obs = self._observation() if self._noisy else buf.obs[0].copy()
-            return obs, reward, reason is not None, False, info
-        self._clock.advance(sim.ist[:1, 0], sim.ist[:1, 2])
-        if self.tracking is not None:
-            self.tracking.after_period(sim.ist[:1, 2])
-        if self._track_reward:
-            track = self.tracking.reward(
-                sim.q[:1], sim.qd[:1], self._hip[:1], sim.ist[:1, 2] - steps0,
-                np.array([reason is None]),
-            )[0]  # fmt: skip
-            info.update(zip(TRACK_KEYS, track[:-1].tolist(), strict=True))
-            reward = float(track[-1])
-        return self._observation(), reward, reason is not None, False, info
-
-    def _observation(self) -> np.ndarray:
-        """The observation (with the phase and reference entries, and noise, when asked for)."""
-        obs = (
-            self._obs
-            if self._clock is None
-            else observations(self._obs, self._clock, self.tracking, self)
-        )
-        return self._perturb.observe(obs, [self.np_random], [0])[0].copy()
-
-    def _observe(self) -> None:
-        self._buf.observe()
-
-    def _info(self, events, terms, reason) -> dict[str, Any]:
-        """The info dict; ``terms``: the reward terms' values in REWARD_TERMS order."""
-        mode, side, steps, _ = self._sim.ist[0].tolist()
-        switches, events = event_infos(events) if events else ((), ())
-        forward, alive, switch, step, ctrl = terms  # REWARD_TERMS order
-        return {
-            "mode": mode,
-            "stance_side": side,
-            "steps_completed": steps,
-            "t": self._sim.fst.item(0),  # row 0, column 0 (fastest scalar read)
-            "hip_y": self._hip.item(0),
-            "switches": switches,
-            "events": events,
-            "termination_reason": reason,
-            "reward_forward": forward,
-            "reward_alive": alive,
-            "reward_switch": switch,
-            "reward_step": step,
-            "reward_ctrl": ctrl,
-        }
+        return self.core.observation(rngs)[0], float(rewards[0]), done, False, info
 
     def render(self):
         """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""
@@ -525,74 +327,6 @@ class ConstrainedBipedEnv(gym.Env):
             self._renderer = None
 
 
-def event_infos(events) -> tuple[tuple, tuple]:
-    """The ``info`` entries ``switches`` and ``events`` of a period's events (both envs).
-
-    ``switches``: (t, from, to) of each model switch; ``events``: (t, name, terminal) of each.
-    """
-    switches = tuple(
-        (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
-    )
-    return switches, tuple((e.t, e.code.name.lower(), e.terminal) for e in events)
-
-
-def make_clock_and_tracking(n: int, env: ConstrainedBipedEnv):
-    """The contact clock (or None) and :class:`~.tracking.Tracking` (or None) of ``n`` envs.
-
-    A clock is kept when the phase is observed or a tracking option needs the reference; the
-    tracking object when one does, or for PD-target actions.
-    """
-    ts = env.tracking_settings
-    needs_clock = env.phase_obs or ts["needs_reference"]
-    clock = ContactClock(n, env.dt) if needs_clock else None
-    tracking = None
-    if ts["needs_reference"] or ts["action"] == "pd":
-        tracking = Tracking(n, ts, env.torque_limit_nm, clock)
-    return clock, tracking
-
-
-def draw_episode_starts(env: ConstrainedBipedEnv, sim, idx: np.ndarray, rngs, clock, tracking):
-    """Sampled starts of slots ``idx`` (slot ``idx[k]`` draws from ``rngs[k]``), clocks started.
-
-    ``env`` gives the start settings. With a tracking reference, its reference-state starts and
-    clock placement (:meth:`~.tracking.Tracking.draw_starts`); else the env's own starts.
-    """
-    if tracking is not None and tracking.ref is not None:
-        tracking.draw_starts(
-            env.params, env.options, sim, idx, rngs, env.start, env.posture,
-            env.reset_noise_scale,
-        )  # fmt: skip
-        return
-    draw_starts(
-        env.params, env.options, sim, idx, rngs, env.start, env.posture, env.reset_noise_scale
-    )
-    start_clocks(clock, None, idx, sim)
-
-
-def start_clocks(clock, tracking, idx: np.ndarray, sim) -> None:
-    """Start the clocks of slots ``idx`` at their current states (placed on the reference)."""
-    if clock is None:
-        return
-    if tracking is not None and tracking.ref is not None:
-        tracking.start_given(idx, sim)
-    else:
-        clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
-
-
-def observations(obs: np.ndarray, clock, tracking, env) -> np.ndarray:
-    """(n, dim) observations: base, phase (``phase_obs``), reference (``reference_obs``)."""
-    parts = [obs]
-    if env.phase_obs:
-        parts.append(clock.features())
-    if env.reference_obs:
-        parts.append(tracking.observation())
-    return np.concatenate(parts, axis=1) if len(parts) > 1 else obs.copy()
-
-
-ENV_ARGUMENTS: tuple[str, ...] = tuple(
-    name
-    for name, p in inspect.signature(ConstrainedBipedEnv.__init__).parameters.items()
-    if name != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD
-)
+ENV_ARGUMENTS: tuple[str, ...] = SETTINGS_ARGUMENTS + ("render_mode",)
 """The keyword arguments of ``gym.make("ConstrainedBiped-v0", ...)`` (a misspelt one raises a
 ValueError listing these)."""

@@ -49,6 +49,10 @@ OBS_NAMES: tuple[str, ...] = (
     "f_contact_normal",
 )
 """Observation entries, in order (see the env docstring's table)."""
+OBS_Q, OBS_QD, OBS_HIP = slice(0, 6), slice(6, 12), slice(12, 16)
+"""Where the observation holds theta0, q1..q5; their rates; the hip's (y, z, vy, vz)."""
+OBS_SIDE, OBS_MODE, OBS_FORCES = 16, slice(17, 21), slice(21, 24)
+"""The stance leg; the model one-hot; the contact forces (toe, heel, point contact)."""
 
 
 def _obs_bounds() -> tuple[np.ndarray, np.ndarray]:

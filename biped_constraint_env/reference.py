@@ -35,6 +35,8 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 """Shipped references: ``reference_midstride.npz`` and ``reference_rest.npz``."""
 REFERENCES = ("midstride", "rest")
 FIELDS = ("q", "qd", "hip", "mode", "j", "step", "first")
+HIP_Y, HIP_Z, HIP_VY, HIP_VZ = range(12, 16)
+"""Columns of a phase table's row (q 0-5, q-dot 6-11, then the hip's y, z, vy, vz)."""
 
 
 @dataclass(frozen=True)

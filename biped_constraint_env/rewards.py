@@ -1,17 +1,139 @@
-"""Reward terms and terminations beyond the simulator's events (shared by both envs)."""
+"""The reward registry, the compiled walking reward and the terminations beyond the events.
+
+Every reward *kind* is a tuple of named terms with their weights and, for kernel terms, their
+kernel scales, as data (:data:`REWARD_KINDS`); an env's ``reward`` kwarg picks a kind and may
+override any weight or kernel (``reward={"kind": "tracking", "weights": {"pose": 0.6}}``), and
+the chosen values are part of the env's settings (``env.unwrapped.settings.reward``), saved with
+every training run. ``info["reward_<term>"]`` gives each term of the env's kind; they add up to
+the reward. Shared by both envs.
+
+* ``"env"`` (the walking task's own): hip progress, an alive bonus, a bonus per forward model
+  switch and per completed step, and a torque cost (:func:`nb_reward_terms`, in the compiled
+  period).
+* ``"tracking"`` (a reference walk's, :mod:`.tracking`): DeepMimic-style exponential kernels of
+  the pose, rate, hip-height and hip-speed errors against the reference at the contact clock,
+  plus a bonus per completed step.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from .jit import njit_noalloc
-from .validation import check_real
+from .validation import check_choice, check_mapping, check_real
 
 TERMINATION_NON_FINITE = "non_finite"
 TERMINATION_FALL = "fall"
 
-REWARD_TERMS = ("reward_forward", "reward_alive", "reward_switch", "reward_step", "reward_ctrl")
-"""Names of the reward terms in ``info`` (their sum is the reward)."""
+
+@dataclass(frozen=True)
+class RewardTerm:
+    """One named reward term: its default weight and, for a kernel term, its kernel scale.
+
+    A kernel term is weight * exp(-kernel * squared error).
+    """
+
+    name: str
+    weight: float
+    kernel: float | None = None
+    doc: str = ""
+
+
+REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
+    "env": (
+        RewardTerm("forward", 1.0, doc="weight * hip progress / dt [m/s] (forward_reward_weight)"),
+        RewardTerm("alive", 0.5, doc="weight per period not ended by an event (alive_bonus)"),
+        RewardTerm("switch", 1.0, doc="weight per forward model switch (switch_bonus)"),
+        RewardTerm("step", 5.0, doc="weight per completed walking step (step_bonus)"),
+        RewardTerm("ctrl", 0.1, doc="-weight * sum((tau / limit)^2) (ctrl_cost_weight)"),
+    ),
+    "tracking": (
+        RewardTerm("pose", 0.5, 5.0, "kernel of the six angles' squared error [rad^2]"),
+        RewardTerm("velocity", 0.1, 0.05, "kernel of their rates' squared error [(rad/s)^2]"),
+        RewardTerm("hip_height", 0.2, 200.0, "kernel of the hip height's squared error [m^2]"),
+        RewardTerm("hip_speed", 0.2, 5.0, "kernel of the hip speed's squared error [(m/s)^2]"),
+        RewardTerm("step", 1.0, doc="weight per completed walking step"),
+    ),
+}
+"""The reward kinds and their terms. The tracking kernels' weights sum to 1 (a period on the
+reference earns 1) and each halves its term at an error of about 0.37 rad (one angle),
+3.7 rad/s, 59 mm and 0.37 m/s; a step takes about 170 periods of 5 ms."""
+
+REWARD_TERMS = tuple(f"reward_{t.name}" for t in REWARD_KINDS["env"])
+"""``info`` keys of the walking reward's terms (the compiled reward's columns, in order)."""
+
+ENV_WEIGHT_KWARGS = ("forward_reward_weight", "alive_bonus", "switch_bonus", "step_bonus",
+                     "ctrl_cost_weight")  # fmt: skip
+"""The env kwargs that set the ``"env"`` reward's weights (as Gymnasium's MuJoCo envs name
+theirs), in term order."""
+
+
+@dataclass(frozen=True)
+class RewardSettings:
+    """The validated reward of an env: its kind and each term's weight and kernel."""
+
+    kind: str
+    weights: tuple[float, ...]
+    kernels: tuple[float | None, ...]
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        """The kind's term names, in order."""
+        return tuple(t.name for t in REWARD_KINDS[self.kind])
+
+    @property
+    def info_keys(self) -> tuple[str, ...]:
+        """The ``info`` keys of the terms (``reward_<term>``)."""
+        return tuple(f"reward_{t}" for t in self.terms)
+
+    def weight(self, term: str) -> float:
+        """The weight of ``term``."""
+        return self.weights[self.terms.index(term)]
+
+    def kernel(self, term: str) -> float:
+        """The kernel scale of ``term`` (a kernel term)."""
+        return self.kernels[self.terms.index(term)]
+
+    def as_dict(self) -> dict[str, Any]:
+        """``{"kind", "weights", "kernels"}`` as the ``reward`` kwarg takes it."""
+        kernels = {t: k for t, k in zip(self.terms, self.kernels, strict=True) if k is not None}
+        return {"kind": self.kind, "weights": dict(zip(self.terms, self.weights, strict=True)),
+                "kernels": kernels}  # fmt: skip
+
+
+def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
+    """The ``reward`` kwarg (a kind's name or ``{"kind", "weights", "kernels"}``) validated.
+
+    ``env_weights``: the :data:`ENV_WEIGHT_KWARGS` given (None: the registry's); they set the
+    ``"env"`` kind's weights and are refused with another kind (they would do nothing).
+    """
+    spec = {"kind": reward} if isinstance(reward, str) else reward
+    check_mapping("reward", spec, ("kind", "weights", "kernels"))
+    kind = check_choice("reward kind", spec.get("kind", "env"), sorted(REWARD_KINDS))
+    terms = REWARD_KINDS[kind]
+    names = [t.name for t in terms]
+    weights = {t.name: t.weight for t in terms}
+    kernels = {t.name: t.kernel for t in terms}
+    given = {k: v for k, v in env_weights.items() if v is not None}
+    if given and kind != "env":
+        raise ValueError(f"{sorted(given)} set the 'env' reward's weights, not {kind!r}'s; "
+                         "give reward={'kind': ..., 'weights': {...}}")  # fmt: skip
+    for kwarg, value in given.items():
+        weights[names[ENV_WEIGHT_KWARGS.index(kwarg)]] = check_real(
+            kwarg, value, 0.0, REWARD_WEIGHT_MAX
+        )
+    for name, value in check_mapping("reward weights", spec.get("weights", {}), names).items():
+        weights[name] = check_real(f"reward weight {name!r}", value, 0.0, REWARD_WEIGHT_MAX)
+    kernel_names = [t.name for t in terms if t.kernel is not None]
+    for name, value in check_mapping("reward kernels", spec.get("kernels", {}),
+                                     kernel_names).items():  # fmt: skip
+        kernels[name] = check_real(f"reward kernel {name!r}", value, 0.0, REWARD_WEIGHT_MAX,
+                                   low_open=True)  # fmt: skip
+    return RewardSettings(kind, tuple(weights[n] for n in names),
+                          tuple(kernels[n] for n in names))  # fmt: skip
 
 
 REWARD_WEIGHT_MAX = 1e6
@@ -70,23 +192,6 @@ def nb_reward_terms(progress_m, dt, switches, steps, alive, tau, cfg, out, tau_s
     out[3] = cfg[CFG_STEP] * steps
     out[4] = -cfg[CFG_CTRL] * tau_sq / (limit * limit)
     out[5] = out[0] + out[1] + out[2] + out[3] + out[4]
-
-
-def reward_weights(
-    forward: float, alive: float, switch: float, step: float, ctrl: float
-) -> tuple[float, ...]:
-    """The validated reward weights (each in [0, REWARD_WEIGHT_MAX]), in REWARD_TERMS order."""
-    names = (
-        "forward_reward_weight",
-        "alive_bonus",
-        "switch_bonus",
-        "step_bonus",
-        "ctrl_cost_weight",
-    )
-    values = (forward, alive, switch, step, ctrl)
-    return tuple(
-        check_real(n, v, 0.0, REWARD_WEIGHT_MAX) for n, v in zip(names, values, strict=True)
-    )
 
 
 def check_fall_height(fall_hip_height_m) -> float | None:

@@ -34,8 +34,6 @@ TASK_DEFAULTS: dict[str, Any] = {
     "reward": "env",
     "rsi": 0.0,
     "action": "torque",
-    "pd_around": "fixed",
-    "pd_offset": None,
     "phase_obs": False,
 }
 """The learning-task settings every task starts from (the env's own reward, torques)."""
@@ -53,9 +51,7 @@ TASKS: dict[str, dict[str, Any]] = {
         "start": "midstride",
         "reward": "tracking",
         "rsi": 0.5,
-        "action": "pd",
-        "pd_around": "reference",
-        "pd_offset": TRACK_PD_OFFSET_RAD,
+        "action": {"kind": "pd", "around": "reference", "offset": TRACK_PD_OFFSET_RAD},
         "phase_obs": True,
     },
     "paper": {

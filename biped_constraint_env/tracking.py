@@ -9,27 +9,22 @@ phase. The default env uses none of it.
 
 * ``reward="tracking"``: a weighted sum of exponential kernels of the error against the
   reference at the clock, as DeepMimic's: joint angles (theta0 included, wrapped), joint
-  rates, hip height and hip forward speed (:data:`TRACKING_WEIGHTS`, which sum to 1, and
-  :data:`TRACKING_KERNELS`), plus :data:`TRACKING_STEP_BONUS` per completed step. Every term
-  is positive, so ending an episode early never pays; a period ended by an event earns no
-  kernel terms. ``info["track_<term>"]`` gives each term (:data:`TRACKING_TERMS`).
+  rates, hip height and hip forward speed, plus a bonus per completed step (weights and
+  kernels: :data:`~.rewards.REWARD_KINDS`). Every term is positive, so ending an episode
+  early never pays; a period ended by an event earns no kernel terms. ``info["reward_<term>"]``
+  gives each term.
 * ``rsi`` (reference-state initialisation): that fraction of the resets starts at a recorded
   reference state drawn uniformly (its clock with it); the others draw the env's ``start``.
 * ``reference_obs=True``: the reference's q and q-dot at the clock are appended to the
   observation (12 entries, after the phase entries of ``phase_obs``), so that a policy sees
   its target at run time. Without it a policy sees the phase only (``phase_obs``: the
   first-step flag and the time in the model, which with the model one-hot is the clock).
-* ``action="pd"``: the action in [-1, 1]^5 sets joint targets
-  ``pose + pd_offset + pd_range * a``
-  [rad] for q1..q5, where ``pose`` is a fixed pose, ``pd_pose`` (default
-  :data:`PD_FIXED_POSE_RAD`; ``pd_around="fixed"``, the default: no reference at run time),
-  or the reference's q at the
-  clock (``pd_around="reference"``), plus a constant ``pd_offset`` [rad] (default 0; as
-  legged-robot RL's default joint offsets); the torques ``Kp (target - q) + Kd (rate - q-dot)``
-  (:data:`PD_KP` x ``pd_gain_scale``, :data:`PD_KD` x its square root; ``rate`` is 0 about
-  the fixed pose and the reference's q-dot about the reference), clipped to the torque
-  limit, are evaluated at every physics step ``pd_dt`` while the targets hold over the
-  period (:mod:`.actions`).
+* ``action={"kind": "pd", ...}``: the action in [-1, 1]^5 sets joint targets
+  ``base + offset + range * a`` [rad] for q1..q5, where ``base`` is a fixed ``pose``
+  (``around="fixed"``, the default: no reference at run time) or the reference's q at the
+  clock (``around="reference"``), plus a constant ``offset`` [rad] (as legged-robot RL's
+  default joint offsets); the PD law runs at every physics step while the targets hold over
+  the period (:mod:`.actions`, :class:`~.settings.ActionSettings`).
 
 Clock: the reference's first step (its recording's first step from its own start) serves the
 starts of the same kind, until their first step completes: a start at rest with the rest
@@ -39,115 +34,48 @@ gait's phase of its model at the state nearest in q; reference-state starts take
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .actions import PD_KD, PD_KP, pd_config
+from .actions import pd_config
 from .clock import ContactClock
 from .hybrid import wrap_angles
 from .model import N_ACTUATED, N_LINKS
-from .reference import REFERENCES, Reference, load_reference
+from .reference import HIP_VY, HIP_Z, Reference, load_reference
 from .starts import draw_starts, start_slots
-from .validation import check_array, check_bool, check_choice, check_real
 
-TRACKING_TERMS = ("pose", "velocity", "hip_height", "hip_speed", "step")
-"""The tracking reward's terms, in ``info`` as ``track_<term>`` (their sum is the reward)."""
-TRACKING_WEIGHTS = {"pose": 0.5, "velocity": 0.1, "hip_height": 0.2, "hip_speed": 0.2}
-"""Weights of the kernel terms (they sum to 1: a period on the reference earns 1)."""
-TRACKING_KERNELS = {"pose": 5.0, "velocity": 0.05, "hip_height": 200.0, "hip_speed": 5.0}
-"""Kernel scales k: term = weight * exp(-k * squared error); the errors are summed over the six
-angles for pose [rad^2] and their rates for velocity [(rad/s)^2]; hip height [m^2] and
-forward speed [(m/s)^2]. Each halves the term at an error of about: 0.37 rad (one angle),
-3.7 rad/s, 59 mm, 0.37 m/s."""
-TRACKING_STEP_BONUS = 1.0
-"""Reward per completed walking step in the tracking task (a step takes about 170 periods)."""
-PD_GAIN_SCALE_MAX = 100.0
-PD_RANGE_RAD = 1.0
-"""Default half-range of the PD targets around the pose [rad] (``pd_range``)."""
-PD_RANGE_MAX_RAD = 3.0
-PD_OFFSET_MAX_RAD = 1.0
-"""Bound of each ``pd_offset`` entry [rad]."""
-PD_FIXED_POSE_RAD = np.array([-0.1, 0.1, -0.3, -0.4, 0.7])
-"""The default ``pd_pose`` of ``pd_around="fixed"``: q1..q5 of the Fig. 2 rest posture [rad]."""
-ACTIONS = ("torque", "pd")
-PD_AROUND = ("fixed", "reference")
-REWARDS = ("env", "tracking")
+if TYPE_CHECKING:
+    from .settings import EnvSettings
 
-
-def check_tracking_settings(
-    start: str,
-    reward,
-    reference,
-    rsi,
-    action,
-    pd_around,
-    pd_range,
-    reference_obs,
-    pd_gain_scale=1.0,
-    pd_pose=None,
-    pd_offset=None,
-) -> dict:
-    """The validated tracking options of an env (see the module docstring).
-
-    ``reference`` None picks "rest" for ``start`` "rest" or "mixed" (that recording walks the
-    first step from rest, then the gait) and "midstride" otherwise.
-    """
-    out = {
-        "reward": check_choice("reward", reward, REWARDS),
-        "rsi": check_real("rsi", rsi, 0.0, 1.0),
-        "action": check_choice("action", action, ACTIONS),
-        "pd_around": check_choice("pd_around", pd_around, PD_AROUND),
-        "pd_range": check_real(
-            "pd_range", pd_range, 0.0, PD_RANGE_MAX_RAD, low_open=True, unit=" [rad]"
-        ),
-        "reference_obs": check_bool("reference_obs", reference_obs),
-        "pd_gain_scale": check_real(
-            "pd_gain_scale", pd_gain_scale, 0.0, PD_GAIN_SCALE_MAX, low_open=True
-        ),
-        "pd_pose": PD_FIXED_POSE_RAD.copy()
-        if pd_pose is None
-        else check_array("pd_pose", pd_pose, (N_ACTUATED,), np.pi, " [rad]"),
-        "pd_offset": np.zeros(N_ACTUATED)
-        if pd_offset is None
-        else check_array("pd_offset", pd_offset, (N_ACTUATED,), PD_OFFSET_MAX_RAD, " [rad]"),
-    }
-    if reference is None:
-        reference = "rest" if start in ("rest", "mixed") else "midstride"
-    if not isinstance(reference, str) or not (
-        reference in REFERENCES or (reference.endswith(".npz") and Path(reference).is_file())
-    ):
-        raise ValueError(f"reference must be one of {REFERENCES} or an npz path, got {reference!r}")
-    out["reference"] = reference
-    out["needs_reference"] = (
-        out["reward"] == "tracking"
-        or out["rsi"] > 0
-        or out["reference_obs"]
-        or (out["action"] == "pd" and out["pd_around"] == "reference")
-    )
-    return out
+KERNEL_ERRORS = ("pose", "velocity", "hip_height", "hip_speed")
+"""The tracking reward's kernel terms (:data:`~.rewards.REWARD_KINDS` ``"tracking"``), in the
+order :meth:`Tracking.reward` computes their errors."""
 
 
 class Tracking:
     """The tracking task's computations for N environments on their contact clock.
 
     Args:
-        n: environments. settings: :func:`check_tracking_settings`. torque_limit_nm: the
-            env's torque bound. clock: the env's :class:`~.clock.ContactClock`.
+        n: environments. settings: the env's :class:`~.settings.EnvSettings`. clock: the
+            env's :class:`~.clock.ContactClock` (None when no option needs the reference).
     """
 
-    def __init__(self, n: int, settings: dict, torque_limit_nm: float, clock: ContactClock):
+    def __init__(self, n: int, settings: EnvSettings, clock: ContactClock | None):
         """Load the reference (when an option needs it) and index its phase tables."""
         self.settings = settings
+        self.action = settings.action
         self.clock = clock
-        self.limit = float(torque_limit_nm)
-        self.kp = PD_KP * settings["pd_gain_scale"]
-        self.kd = PD_KD * np.sqrt(settings["pd_gain_scale"])
         self.ref: Reference | None = None
         self.first = np.zeros(n, bool)  # in the reference's first step from its own start
         self._per = 1.0  # reference periods per control period (its clock is in its periods)
-        if settings["needs_reference"]:
-            self.ref = load_reference(settings["reference"])
+        r = settings.reward
+        if r.kind == "tracking":
+            self._w = np.array([r.weight(t) for t in KERNEL_ERRORS])
+            self._k = np.array([r.kernel(t) for t in KERNEL_ERRORS])
+            self._step_bonus = r.weight("step")
+        if settings.needs_reference:
+            self.ref = load_reference(settings.reference)
             self._per = clock.dt / self.ref.dt if clock.dt != self.ref.dt else 1.0
             tables = self.ref.tables
             self._rows = np.concatenate([tables[k] for k in sorted(tables)])
@@ -182,7 +110,7 @@ class Tracking:
         draws are exactly the env's own.
         """
         idx = np.asarray(idx, np.int64)
-        rsi = self.settings["rsi"]
+        rsi = self.settings.start.rsi
         on_ref = np.zeros(idx.shape[0], bool)
         rows = np.zeros(idx.shape[0], np.int64)
         if rsi > 0:
@@ -243,21 +171,22 @@ class Tracking:
         the offset (its rates); an action a sets the targets base + ``pd_range`` x a, and the
         compiled period applies the PD law to them (:mod:`.actions`).
         """
-        offset = self.settings["pd_offset"]
-        if self.settings["pd_around"] == "reference":
+        offset = np.array(self.action.offset)
+        if self.action.around == "reference":
             rows = self.rows()
             return rows[:, 1:N_LINKS] + offset, rows[:, N_LINKS + 1 : 2 * N_LINKS]
-        base = self.settings["pd_pose"] + offset
+        base = np.array(self.action.pose) + offset
         return np.broadcast_to(base, (n, N_ACTUATED)), np.zeros((n, N_ACTUATED))
 
     @property
     def pd_follows_reference(self) -> bool:
         """Whether the PD targets' base moves with the reference (set before every period)."""
-        return self.settings["pd_around"] == "reference"
+        return self.action.pd and self.action.around == "reference"
 
-    def pd_config(self, n_sub: int) -> np.ndarray:
-        """The compiled period's PD settings (:func:`~.actions.pd_config`) for ``n_sub`` steps."""
-        return pd_config(n_sub, self.limit, self.settings["pd_range"], self.kp, self.kd)
+    def pd_config(self) -> np.ndarray:
+        """The compiled period's PD settings (:func:`~.actions.pd_config`)."""
+        a = self.action
+        return pd_config(a.pd_substeps, a.torque_limit_nm, a.range, a.kp, a.kd)
 
     # ------------------------------------------------------------------ observation, reward
     def observation(self) -> np.ndarray:
@@ -265,7 +194,7 @@ class Tracking:
         return self.rows()[:, : 2 * N_LINKS]
 
     def reward(self, q, qd, hip, steps, alive) -> np.ndarray:
-        """(n, 6): the tracking terms (:data:`TRACKING_TERMS` order) and their sum.
+        """(n, 6): the tracking reward's terms (the registry's order) and their sum.
 
         For the states after a period against the reference at the clock after it (advance
         the clock first). ``hip`` (n, 4): y, z, vy, vz; ``steps``: steps completed in the
@@ -275,13 +204,13 @@ class Tracking:
         err = (
             np.sum(wrap_angles(q - ref[:, :N_LINKS]) ** 2, axis=1),
             np.sum((qd - ref[:, N_LINKS : 2 * N_LINKS]) ** 2, axis=1),
-            (hip[:, 1] - ref[:, 13]) ** 2,
-            (hip[:, 2] - ref[:, 14]) ** 2,
+            (hip[:, 1] - ref[:, HIP_Z]) ** 2,
+            (hip[:, 2] - ref[:, HIP_VY]) ** 2,
         )
-        out = np.zeros((q.shape[0], len(TRACKING_TERMS) + 1))
-        for c, (name, e) in enumerate(zip(TRACKING_TERMS[:-1], err, strict=True)):
-            out[:, c] = TRACKING_WEIGHTS[name] * np.exp(-TRACKING_KERNELS[name] * e)
+        out = np.zeros((q.shape[0], len(KERNEL_ERRORS) + 2))
+        for c, e in enumerate(err):
+            out[:, c] = self._w[c] * np.exp(-self._k[c] * e)
         out[~alive, :-2] = 0.0
-        out[:, -2] = TRACKING_STEP_BONUS * steps
+        out[:, -2] = self._step_bonus * steps
         out[:, -1] = out[:, :-1].sum(axis=1)
         return out

@@ -14,48 +14,21 @@ from typing import Any
 
 import numba
 import numpy as np
+from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .actions import action_config, validate_actions
-from .env import (
-    TRACK_KEYS,
-    ConstrainedBipedEnv,
-    draw_episode_starts,
-    event_infos,
-    make_clock_and_tracking,
-    observations,
-    start_clocks,
-)
+from .actions import validate_actions
+from .core import EnvCore
 from .model import N_ACTUATED
-from .period import EnvBuffers
-from .perturbations import Perturbations
-from .rewards import REWARD_TERMS, TERMINATION_FALL, TERMINATION_NON_FINITE, reward_config
-from .simulator import evaluate
-from .starts import check_start_state, state_from_options
-from .state import STATUS_NONFINITE
+from .settings import make_settings
+from .starts import state_from_options
 from .tasks import MAX_EPISODE_STEPS
 from .validation import check_int, check_seeds
 
 MAX_NUM_ENVS = 1_000_000
 """Largest accepted ``num_envs``."""
-
-_MASK_KEYS = tuple(
-    f"_{k}"
-    for k in (
-        "mode",
-        "stance_side",
-        "steps_completed",
-        "t",
-        "hip_y",
-        "switches",
-        "events",
-        "termination_reason",
-    )  # fmt: skip
-    + REWARD_TERMS
-)
-"""Gymnasium's per-key masks of the vector info (every entry is set for every env)."""
 
 
 class ConstrainedBipedVectorEnv(VectorEnv):
@@ -69,7 +42,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             (a finished sub-environment is reset within the same step; its last observation
             is in ``info["final_obs"]`` and its last info in ``info["final_info"]``, as
             Stable-Baselines3's VecEnv expects).
-        **kwargs: the single environment's keyword arguments (``render_mode`` excepted).
+        num_threads: numba threads of the compiled period (1: serial).
+        **kwargs: the single environment's keyword arguments (``render_mode`` excepted),
+            validated once into ``settings`` (:mod:`.settings`).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -82,7 +57,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         num_threads: int = 1,
         **kwargs: Any,
     ):
-        """Create the batch; the single env validates the arguments."""
+        """Create the batch."""
         if kwargs.get("render_mode") is not None:
             raise ValueError("the batched vector env does not render; use gym.make for that")
         kwargs.pop("render_mode", None)
@@ -99,45 +74,34 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         if autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {autoreset_mode}")
         self.metadata = {**self.metadata, "autoreset_mode": autoreset_mode}
-        self._proto = ConstrainedBipedEnv(**kwargs)  # validation and settings, never stepped
+        self.settings = make_settings(**kwargs)
+        s = self.settings
+        self.core = EnvCore(s, num_envs, num_threads)
         self.num_envs = num_envs
+        self.num_threads = num_threads
         self.max_episode_steps = max_episode_steps
-        self.single_action_space = self._proto.action_space
-        self.single_observation_space = self._proto.observation_space
+        bound = s.action.bound
+        self.single_action_space = spaces.Box(-bound, bound, (N_ACTUATED,), np.float32)
+        self.single_observation_space = self.core.observation_space
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self.params = self._proto.params
-        self.options = self._proto.options
-        self.dt = self._proto.dt
-        p = self._proto
-        self._buf = EnvBuffers(
-            num_envs,
-            self.params,
-            self.options,
-            self.dt,
-            reward_config(p.weights, p.torque_limit_nm, p.fall_hip_height_m),
-            action_config(p.action_bound, p.out_of_range),
-            num_threads,
-            pcfg=p.action_mapping(),
-        )
-        self.num_threads = num_threads
-        self._sim, self._obs, self._hip = self._buf.sim, self._buf.obs, self._buf.hip
+        self.params, self.options, self.dt = s.physics.params, s.physics.options, s.dt
         self._needs_reset = True  # until the first reset succeeds
-        self._clock, self.tracking = make_clock_and_tracking(num_envs, p)
-        self._perturb = Perturbations(num_envs, p.perturbation_settings, p.params, self._buf)
-        self._track_reward = p.tracking_settings["reward"] == "tracking"
-        self._pd = p.pd_action
         self._elapsed = np.zeros(num_envs, np.int64)
         self._autoreset = np.zeros(num_envs, bool)
+        self._all = np.arange(num_envs)
+        self._everyone = np.ones(num_envs, bool)
         self._rngs: list[np.random.Generator] = [
             seeding.np_random(None)[0] for _ in range(num_envs)
         ]
 
-    def _reset_slots(self, idx: np.ndarray) -> None:
-        """Sampled starts for slots ``idx`` (each drawn from its own RNG, as the single env)."""
-        rngs = [self._rngs[i] for i in idx]
-        draw_episode_starts(self._proto, self._sim, idx, rngs, self._clock, self.tracking)
-        self._perturb.start(idx, rngs)
+    def __repr__(self) -> str:
+        """The batch with its settings."""
+        return f"ConstrainedBipedVectorEnv(num_envs={self.num_envs}, {self.settings!r})"
+
+    def _reset_rows(self, idx: np.ndarray) -> None:
+        """Drawn starts for rows ``idx`` (each from its own generator, as the single env)."""
+        self.core.draw_starts(idx, [self._rngs[i] for i in idx])
         self._elapsed[idx] = 0
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
@@ -147,25 +111,18 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             seeds = check_seeds(seed, self.num_envs)
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         if options is not None and not (isinstance(options, dict) and not options):
-            state = state_from_options(options)
-            check_start_state(self.params, state)
-            for i in range(self.num_envs):
-                self._sim.set(
-                    i, state, evaluate(self.params, state, np.zeros(N_ACTUATED), self.options)[1]
-                )
+            self.core.set_starts(self._all, state_from_options(options), self._rngs)
             self._elapsed[:] = 0
-            start_clocks(self._clock, self.tracking, np.arange(self.num_envs), self._sim)
-            self._perturb.start(np.arange(self.num_envs), self._rngs)
         else:
-            self._reset_slots(np.arange(self.num_envs))
+            self._reset_rows(self._all)
         self._autoreset[:] = False
-        self._fell = np.zeros(self.num_envs, bool)
-        self._observe()
+        self.core.buf.observe()
+        self.core.clear_period()
         self._needs_reset = False
-        return self._observation(), self._infos(np.zeros(self.num_envs), None)
+        return self.core.observation(self._rngs), self._masked(self.core.info())
 
     def step(self, actions):
-        """Step every sub-environment (autoreset on the step after an episode ends)."""
+        """Step every sub-environment (autoreset as ``autoreset_mode`` says)."""
         if self._needs_reset:
             raise RuntimeError("step() called before reset(); call reset()")
         actions = np.asarray(actions)
@@ -173,135 +130,44 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             raise ValueError(
                 f"actions must have shape ({self.num_envs}, {N_ACTUATED}), got {actions.shape}"
             )
-        p = self._proto
-        buf = self._buf
-        act = validate_actions(actions, p.action_bound, p.out_of_range, p.action_bound_name)
+        a = self.settings.action
+        act = validate_actions(actions, a.bound, a.out_of_range, a.bound_name)
         resetting = np.flatnonzero(self._autoreset)
-        if resetting.size:
-            self._reset_slots(resetting)
-        if self._pd:  # after the resets: the targets' bases at the clocks of the new starts
-            buf.tgt[:], buf.rate[:] = self.tracking.bases(self.num_envs)
-        if self._perturb.active:  # pushes due now (stepped rows); the delayed actions
-            stepped_rows = np.flatnonzero(~self._autoreset)
-            act = self._perturb.before_period(act, self._rngs, stepped_rows)
-        buf.act[:] = act
-        steps0 = buf.sim.ist[:, 2].copy()
-        buf.sim.status[resetting] = -1  # not stepped this period; zero reward
-        if buf.period():  # the actions were validated above, so this cannot fail
-            raise AssertionError(f"the compiled action check refused validated actions {act}")
-        buf.sim.status[resetting] = 0
-        buf.sim.n_events[resetting] = 0
-        if self._clock is not None:
-            stepped = np.ones(self.num_envs, bool)
-            stepped[resetting] = False
-            self._clock.advance(buf.sim.ist[:, 0], buf.sim.ist[:, 2], stepped)
-            if self.tracking is not None:
-                self.tracking.after_period(buf.sim.ist[:, 2])
-        status = buf.sim.status
-        fell = buf.fell.astype(bool)
-        terminated = (status > 0) | fell
-        self._fell = fell
-        parts = tuple(buf.rew[:, : len(REWARD_TERMS)].T.copy())  # one copy, a row per term
-        rewards = buf.rew[:, -1].copy()
-        if self._track_reward:
-            track = self.tracking.reward(
-                buf.sim.q, buf.sim.qd, self._hip, buf.sim.ist[:, 2] - steps0, ~terminated
-            )
-            track[resetting] = 0.0  # not stepped this period
-            parts = parts + tuple(track[:, :-1].T.copy())
-            rewards = track[:, -1].copy()
+        if resetting.size:  # NEXT_STEP: these rows start again and skip the period
+            self._reset_rows(resetting)
+        skip = resetting if resetting.size else None
+        rewards, terminated = self.core.period(act, self._rngs, skip)
         self._elapsed += 1
         self._elapsed[resetting] = 0
         truncated = np.zeros(self.num_envs, bool)
         if self.max_episode_steps is not None:
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
-        infos = self._infos(np.zeros(self.num_envs), parts)
-        if self._pd:  # the time-mean PD torque of the period
-            infos.update(torque=buf.act.copy(), _torque=np.ones(self.num_envs, bool))
-        if self._perturb.s.push_impulse_ns is not None:
-            everyone = np.ones(self.num_envs, bool)
-            infos.update(
-                push_impulse_ns=self._perturb.push_ns.copy(), _push_impulse_ns=everyone,
-                push_dv_m_s=self._perturb.push_dv.copy(), _push_dv_m_s=everyone,
-            )  # fmt: skip
+        infos = self.core.info()
         done = np.flatnonzero(terminated | truncated)
-        obs = self._observation()
+        obs = self.core.observation(self._rngs)
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:
             final_obs = np.full(self.num_envs, None, dtype=object)
             final_info = np.full(self.num_envs, None, dtype=object)
-            keys = [k for k in infos if not k.startswith("_")]
             for i in done:
                 final_obs[i] = obs[i].copy()
-                final_info[i] = {k: infos[k][i] for k in keys}
-            self._reset_slots(done)
-            self._observe()
-            obs[done] = self._observation(rows=done)[done]
+                final_info[i] = {k: v[i] for k, v in infos.items()}
+            self._reset_rows(done)
+            self.core.buf.observe()
+            obs[done] = self.core.observation(self._rngs, rows=done)[done]
             mask = np.zeros(self.num_envs, bool)
             mask[done] = True
+            infos = self._masked(infos)
             infos.update(
                 final_obs=final_obs, _final_obs=mask, final_info=final_info, _final_info=mask
             )
-        else:
-            self._autoreset = terminated | truncated
-        return obs, rewards, terminated, truncated, infos
+            return obs, rewards, terminated, truncated, infos
+        self._autoreset = terminated | truncated
+        return obs, rewards, terminated, truncated, self._masked(infos)
 
-    def _observation(self, rows=None) -> np.ndarray:
-        """The observations (phase and reference entries, and noise on ``rows``: all)."""
-        obs = (
-            self._obs
-            if self._clock is None
-            else observations(self._obs, self._clock, self.tracking, self._proto)
-        )
-        rows = range(self.num_envs) if rows is None else rows
-        out = self._perturb.observe(obs, self._rngs, rows)
-        return out.copy() if out is self._obs else out
-
-    def _observe(self) -> None:
-        self._buf.observe()
-
-    def _infos(self, zeros: np.ndarray, terms) -> dict[str, Any]:
-        s = self._sim
-        reasons = np.full(self.num_envs, None, dtype=object)
-        fell = getattr(self, "_fell", None)
-        if fell is not None and fell.any():
-            reasons[fell] = TERMINATION_FALL
-        for i in np.flatnonzero(s.status > 0):
-            if s.status[i] == STATUS_NONFINITE:
-                reasons[i] = TERMINATION_NON_FINITE
-            else:
-                reasons[i] = next(e.code.name.lower() for e in s.events_of(int(i)) if e.terminal)
-        keys = REWARD_TERMS + (TRACK_KEYS if self._track_reward else ())
-        parts = terms if terms is not None else (zeros,) * len(keys)
-        mode, side, steps = s.ist[:, :3].T.copy()  # one copy, a row per entry
-        switches, events = _event_infos(s, self.num_envs)
-        info = {
-            "mode": mode,
-            "stance_side": side,
-            "steps_completed": steps,
-            "t": s.fst[:, 0].copy(),
-            "hip_y": self._hip[:, 0].copy(),
-            "switches": switches,
-            "events": events,
-            "termination_reason": reasons,
-            **dict(zip(keys, parts, strict=True)),
-        }
-        everyone = np.ones(self.num_envs, bool)
-        info.update(dict.fromkeys(_MASK_KEYS, everyone))
-        if self._track_reward:
-            info.update(dict.fromkeys((f"_{k}" for k in TRACK_KEYS), everyone))
+    def _masked(self, info: dict[str, Any]) -> dict[str, Any]:
+        """``info`` with Gymnasium's per-key masks (every entry is set for every env)."""
+        info.update({f"_{k}": self._everyone for k in list(info)})
         return info
 
     def close_extras(self, **kwargs: Any) -> None:
         """Nothing to release."""
-
-
-def _event_infos(sim, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per row, the single env's ``info["switches"]`` and ``info["events"]`` (object arrays)."""
-    switches = np.empty(n, dtype=object)
-    events = np.empty(n, dtype=object)
-    switches[:] = [()] * n
-    events[:] = [()] * n
-    for i in np.flatnonzero(sim.n_events[:n]):
-        sw, ev = event_infos(sim.events_of(int(i)))
-        switches[i], events[i] = sw, ev
-    return switches, events

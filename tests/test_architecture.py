@@ -1,8 +1,10 @@
 """One direction of dependency: jit (how the core is compiled) and validation (argument
 checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> the simulator
 (state -> options -> stepper -> advance -> simulator, its Python API) -> the env's parts
-(tasks, actions, starts, rewards, observation) -> period (their compiled control period) ->
-env -> vector_env. Each module may import only modules of lower or equal rank."""
+(tasks, actions, starts, rewards, observation, reference, perturbations) -> settings (all the
+env's arguments, validated once) -> tracking -> period (the compiled control period) -> core
+(N rows around it: starts, reasons, rewards, info) -> env (its one-row case) -> vector_env.
+Each module may import only modules of lower or equal rank."""
 
 import ast
 from pathlib import Path
@@ -37,9 +39,11 @@ LAYERS = [
     "clock",
     "observation",
     "reference",
-    "tracking",
     "perturbations",
+    "settings",
+    "tracking",
     "period",
+    "core",
     "env",
     "vector_env",
     "__init__",

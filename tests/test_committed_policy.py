@@ -33,11 +33,12 @@ def test_committed_walker_is_a_network_alone_and_deterministic():
     torch.set_num_threads(1)
     policy, norm, cfg, state = load_policy(POLICY, "final")
     assert cfg.env_id == "ConstrainedBiped-v0" and cfg.base_controller == ""  # no controller
-    assert cfg.env_kwargs()["task"] == "walk" and cfg.env_kwargs()["preset"] == "default"
+    settings = cfg.settings()
+    assert settings.task == "walk" and settings.physics.preset == "default"
     assert isinstance(policy.features_extractor, FixedNormalizer)
     assert not norm.enabled  # the network normalises its own input
     assert state["num_timesteps"] > 0
-    assert cfg.start == "mixed" and cfg.phase_obs  # trained from rest and mid-stride
+    assert settings.start.start == "mixed" and settings.observation.phase_obs  # both starts
     actor = policy_actor(policy, norm, cfg)
     obs = np.zeros(cfg.obs_dim())
     obs[18] = 1.0
@@ -99,8 +100,9 @@ def test_committed_from_scratch_policy_learned_without_a_teacher_and_walks():
     policy, norm, cfg, state = load_policy(SCRATCH, "final")
     assert cfg.teacher == "" and cfg.base_controller == "" and cfg.bc_anchor_steps == 0
     assert not available(SCRATCH, "imitation")  # no warm start of any kind
-    assert cfg.reward == "tracking" and cfg.action == "pd" and cfg.rsi > 0
+    s = cfg.settings()
+    assert s.reward.kind == "tracking" and s.action.pd and cfg.train_env["rsi"] > 0
+    assert s.start.rsi == 0.0 and s.physics.preset == "default" and s.start.start == "midstride"
     kw = cfg.env_kwargs()
-    assert kw["rsi"] == 0.0 and kw["preset"] == "default" and kw["start"] == "midstride"
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id)
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep

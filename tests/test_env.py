@@ -290,7 +290,7 @@ def test_midstride_start():
     env = gym.make("ConstrainedBiped-v0")
     assert env.spec.max_episode_steps == 6000
     u = env.unwrapped
-    assert u.dt == 0.005 and u.options.stop_at_switch and u.start == "midstride"
+    assert u.dt == 0.005 and u.options.stop_at_switch and u.settings.start.start == "midstride"
     rates = []
     for seed in range(20):
         obs, info = env.reset(seed=seed)
@@ -326,12 +326,15 @@ def test_the_track_task_is_the_from_scratch_recipes_settings():
     """``task="track"``: the tracking settings as one named task, each still overridable."""
     import gymnasium as gym
 
-    env = gym.make("ConstrainedBiped-v0", task="track").unwrapped
-    ts = env.tracking_settings
-    assert ts["reward"] == "tracking" and ts["rsi"] == 0.5 and ts["action"] == "pd"
-    assert ts["pd_around"] == "reference" and list(ts["pd_offset"]) == [0.2, 0, 0, 0, 0]
-    assert env.phase_obs and env.observation_space.shape == (26,)
+    s = gym.make("ConstrainedBiped-v0", task="track").unwrapped.settings
+    assert s.reward.kind == "tracking" and s.start.rsi == 0.5 and s.action.kind == "pd"
+    assert s.action.around == "reference" and list(s.action.offset) == [0.2, 0, 0, 0, 0]
+    assert s.observation.phase_obs and s.dt == 0.005
+    narrower = gym.make("ConstrainedBiped-v0", task="track", action={"range": 0.5}).unwrapped
+    assert narrower.settings.action.range == 0.5  # merged onto the task's PD mapping
+    assert narrower.settings.action.around == "reference"
     plain = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0, action="torque").unwrapped
-    assert plain.tracking_settings["rsi"] == 0.0 and not plain.pd_action
+    assert plain.settings.start.rsi == 0.0 and not plain.settings.action.pd
     walk = gym.make("ConstrainedBiped-v0").unwrapped
-    assert walk.tracking_settings["reward"] == "env" and not walk.pd_action
+    assert walk.settings.reward.kind == "env" and not walk.settings.action.pd
+    assert "reward=RewardSettings(kind='env'" in repr(walk)

@@ -101,22 +101,6 @@ def test_gear_same_in_the_batched_and_the_single_sb3_env():
     np.testing.assert_array_equal(out[0], out[1])
 
 
-def test_push_changes_the_hip_velocity_and_keeps_the_contacts():
-    from training.rollouts import PUSH_HIP_DV_M_S, push
-
-    env = gym.make("ConstrainedBiped-v0")
-    obs, info = env.reset(seed=0)
-    u = env.unwrapped
-    before = u.keypoints()
-    vy0 = obs[14]
-    push(env)
-    st = u.state
-    u._observe()
-    assert u._obs[0, 14] - vy0 == pytest.approx(PUSH_HIP_DV_M_S[0], abs=1e-9)
-    assert st.mode == info["mode"] == 2
-    assert all(np.array_equal(before[k], u.keypoints()[k]) for k in before)  # positions kept
-
-
 def test_train_ppo_with_teacher_smoke(tmp_path):
     from training import train_ppo
 

@@ -1,5 +1,6 @@
 """``info`` has the same keys and values in the single and the batched env, for every task
-option (the batched env adds Gymnasium's ``_key`` masks)."""
+option (the batched env adds Gymnasium's ``_key`` masks), and for every reward kind the reward
+is the sum of the ``reward_<term>`` entries."""
 
 from __future__ import annotations
 
@@ -12,11 +13,16 @@ from training.model_controller import controller_from
 
 OPTIONS = [
     {},
+    {"reward": {"weights": {"step": 2.0, "ctrl": 0.3}}, "alive_bonus": 0.2},
+    {
+        "reward": {"kind": "tracking", "weights": {"pose": 0.7}, "kernels": {"hip_speed": 2.0}},
+        "action": "pd",
+    },
     {"task": "paper"},
     {"phase_obs": True, "start": "mixed"},
     {"reward": "tracking", "rsi": 0.5, "reference_obs": True, "phase_obs": True},
-    {"action": "pd", "pd_offset": [0.2, 0, 0, 0, 0]},
-    {"action": "pd", "pd_around": "reference", "reward": "tracking", "dt": 0.01},
+    {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}},
+    {"action": {"kind": "pd", "around": "reference"}, "reward": "tracking", "dt": 0.01},
     {"perturbations": {"push_impulse_ns": -0.3, "push_at_s": 0.1, "obs_noise": (1e-3, 1e-2)}},
 ]
 
@@ -38,7 +44,7 @@ def test_info_keys_and_values_agree(kw):
         assert {k for k in vinfo if not k.startswith("_")} == set(info)
         assert all(_same(info[key], vinfo[key][i]) for key in info)
     teacher = controller_from("model:teacher_robust")
-    pd = kw.get("action") == "pd"
+    pd = "action" in kw
     live = [True] * n
     obs = [None] * n
     vobs = None
@@ -47,11 +53,14 @@ def test_info_keys_and_values_agree(kw):
             a = np.zeros((n, 5))
         else:
             a = teacher(vobs[:, :24]) if vobs is not None else np.tile([5.0, -20, 0, 0, 0], (n, 1))
-        vobs, _, vterm, _, vinfo = venv.step(a)
+        vobs, vrew, vterm, _, vinfo = venv.step(a)
         for i, e in enumerate(envs):
             if not live[i]:
                 continue
-            obs[i], _, term, _, info = e.step(a[i])
+            obs[i], rew, term, _, info = e.step(a[i])
+            assert rew == vrew[i]
+            terms = [info[k] for k in info if k.startswith("reward_")]
+            assert len(terms) == 5 and rew == pytest.approx(sum(terms), abs=1e-12)
             keys = set(info)
             assert keys <= set(vinfo), keys - set(vinfo)
             assert {k for k in vinfo if not k.startswith("_")} == keys

@@ -14,7 +14,7 @@ import pytest
 
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.actions import PD_KD, PD_KP, check_pd_dt
-from biped_constraint_env.tracking import PD_FIXED_POSE_RAD
+from biped_constraint_env.settings import PD_FIXED_POSE_RAD
 
 DATA = Path(__file__).parent / "data" / "torque_reference.npz"
 ACTION = np.array([0.1, -0.1, 0.2, 0.1, -0.05])
@@ -23,7 +23,7 @@ ACTION = np.array([0.1, -0.1, 0.2, 0.1, -0.05])
 def _pd_run(dt: float, pd_dt: float, periods: int, action=ACTION) -> np.ndarray:
     """(q, q-dot) after ``periods`` of a constant PD action from rest (no noise)."""
     env = gym.make(
-        "ConstrainedBiped-v0", dt=dt, action="pd", pd_dt=pd_dt, start="rest",
+        "ConstrainedBiped-v0", dt=dt, action={"kind": "pd", "dt": pd_dt}, start="rest",
         reset_noise_scale=0.0, stop_at_switch=False,
     )  # fmt: skip
     env.reset(seed=0)
@@ -47,7 +47,7 @@ def test_decimation_one_period_of_held_targets_is_many_short_ones():
 def test_pd_at_the_period_is_the_held_torque_law():
     """``pd_dt = dt``: the PD torque of the period's first state, held (the torque env with
     that torque gives the same trajectory, bit for bit)."""
-    pd = gym.make("ConstrainedBiped-v0", action="pd", pd_dt=0.005, start="rest")
+    pd = gym.make("ConstrainedBiped-v0", action={"kind": "pd", "dt": 0.005}, start="rest")
     tq = gym.make("ConstrainedBiped-v0", start="rest")
     pd.reset(seed=1)
     tq.reset(seed=1)
@@ -65,7 +65,7 @@ def test_pd_at_the_period_is_the_held_torque_law():
 
 def test_pd_torque_limit_applies_at_every_physics_step():
     env = gym.make(
-        "ConstrainedBiped-v0", dt=0.02, action="pd", pd_gain_scale=100.0, start="rest",
+        "ConstrainedBiped-v0", dt=0.02, action={"kind": "pd", "gain_scale": 100.0}, start="rest",
         torque_limit_nm=40.0,
     )  # fmt: skip
     env.reset(seed=0)
@@ -75,7 +75,10 @@ def test_pd_torque_limit_applies_at_every_physics_step():
     assert reward == pytest.approx(sum(terms), abs=1e-12)
 
 
-@pytest.mark.parametrize("kw", [{}, {"pd_around": "reference", "reward": "tracking"}])
+REFERENCE_PD = {"action": {"kind": "pd", "around": "reference"}, "reward": "tracking"}
+
+
+@pytest.mark.parametrize("kw", [{}, REFERENCE_PD])
 def test_pd_single_equals_batched_at_the_physics_rate(kw):
     kw = {"action": "pd", "dt": 0.02, "start": "rest", **kw}
     venv = gym.make_vec("ConstrainedBiped-v0", 3, vectorization_mode="vector_entry_point", **kw)
@@ -112,7 +115,7 @@ def test_pd_dt_is_checked(pd_dt, dt, match):
     with pytest.raises(ValueError, match=match):
         check_pd_dt(pd_dt, dt)
     with pytest.raises(ValueError, match=match):
-        gym.make("ConstrainedBiped-v0", action="pd", dt=dt, pd_dt=pd_dt)
+        gym.make("ConstrainedBiped-v0", action={"kind": "pd", "dt": pd_dt}, dt=dt)
 
 
 def test_pd_dt_default_is_the_physics_step():

@@ -85,13 +85,13 @@ def test_model_randomisation_is_per_row_and_seeded():
     kw = {"perturbations": {"mass_scale": (0.8, 1.2), "friction_ratio": (0.3, 0.7)}}
     venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point", **kw)
     venv.reset(seed=0)
-    chs = venv.unwrapped._buf.chs.copy()
+    chs = venv.unwrapped.core.buf.chs.copy()
     assert len({chs[i, 0, 1, 0] for i in range(4)}) == 4  # four different shank masses
     venv.reset(seed=0)
-    assert np.array_equal(venv.unwrapped._buf.chs, chs)  # the same draws again
+    assert np.array_equal(venv.unwrapped.core.buf.chs, chs)  # the same draws again
     nominal = gym.make_vec("ConstrainedBiped-v0", 2, vectorization_mode="vector_entry_point")
     nominal.reset(seed=0)
-    assert np.all(nominal.unwrapped._buf.chs == nominal.unwrapped._buf.chs[0])
+    assert np.all(nominal.unwrapped.core.buf.chs == nominal.unwrapped.core.buf.chs[0])
 
 
 @pytest.mark.parametrize("mode", [1, 2, 3, 4])

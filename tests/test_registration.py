@@ -22,7 +22,7 @@ def test_one_id_with_string_entry_points():
 def test_defaults_are_the_accurate_physics_and_the_walking_task():
     env = gym.make("ConstrainedBiped-v0").unwrapped
     assert env.options == biped_constraint_env.DEFAULT_OPTIONS.replace(stop_at_switch=True)
-    assert (env.dt, env.start, env.task) == (0.005, "midstride", "walk")
+    assert (env.dt, env.settings.start.start, env.task) == (0.005, "midstride", "walk")
     _, info = env.reset(seed=0)
     assert info["mode"] == 2
 
@@ -30,7 +30,7 @@ def test_defaults_are_the_accurate_physics_and_the_walking_task():
 def test_paper_task_and_overrides():
     env = gym.make("ConstrainedBiped-v0", task="paper").unwrapped
     assert env.options == biped_constraint_env.PAPER_OPTIONS
-    assert (env.dt, env.start) == (0.02, "rest")
+    assert (env.dt, env.settings.start.start) == (0.02, "rest")
     _, info = env.reset(seed=0)
     assert info["mode"] == 1
     # an explicit argument overrides the task's value, the rest of the task stays

@@ -5,29 +5,25 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from biped_constraint_env.env import TRACK_KEYS, ConstrainedBipedEnv
+from biped_constraint_env.actions import PD_KD, PD_KP
+from biped_constraint_env.env import ConstrainedBipedEnv
 from biped_constraint_env.reference import load_reference
-from biped_constraint_env.tracking import (
-    PD_FIXED_POSE_RAD,
-    PD_KD,
-    PD_KP,
-    TRACKING_KERNELS,
-    TRACKING_STEP_BONUS,
-    TRACKING_TERMS,
-    TRACKING_WEIGHTS,
-)
+from biped_constraint_env.rewards import REWARD_KINDS
+from biped_constraint_env.settings import PD_FIXED_POSE_RAD
 
-TRACK = {"reward": "tracking", "rsi": 0.5, "action": "pd", "pd_around": "reference",
-         "pd_range": 0.5, "phase_obs": True, "reference_obs": True}  # fmt: skip
-KERNEL_TERMS = TRACKING_TERMS[:-1]
+TRACK = {"reward": "tracking", "rsi": 0.5, "action": {"kind": "pd", "around": "reference",
+         "range": 0.5}, "phase_obs": True, "reference_obs": True}  # fmt: skip
+TERMS = {t.name: t for t in REWARD_KINDS["tracking"]}
+KERNEL_TERMS = tuple(t for t in TERMS if TERMS[t].kernel is not None)
+TRACK_KEYS = tuple(f"reward_{t}" for t in TERMS)
 
 
 def _at_reference_row(env, row):
     """Reset ``env`` at reference row ``row`` with its clock (reference-state start)."""
     u = env.unwrapped
-    ref = u.tracking.ref
+    ref = u.core.tracking.ref
     u.reset(seed=0, options={"q": ref.q[row], "qd": ref.qd[row], "mode": int(ref.mode[row])})
-    c = u._clock
+    c = u.core.clock
     c.first[0], c.mode[0], c.j[0] = bool(ref.first[row]), ref.mode[row], ref.j[row]
     return ref
 
@@ -35,12 +31,12 @@ def _at_reference_row(env, row):
 def test_kernel_terms_are_their_weights_on_the_reference_and_fall_as_documented():
     env = ConstrainedBipedEnv(reward="tracking")
     env.reset(seed=0)
-    tr = env.tracking
+    tr = env.core.tracking
     rows = tr.rows()
     q, qd, hip = rows[:, :6].copy(), rows[:, 6:12].copy(), rows[:, 12:16].copy()
     on = tr.reward(q, qd, hip, np.array([0]), np.array([True]))[0]
     for c, name in enumerate(KERNEL_TERMS):
-        assert on[c] == pytest.approx(TRACKING_WEIGHTS[name])
+        assert on[c] == pytest.approx(TERMS[name].weight)
     assert on[-1] == pytest.approx(1.0)  # the weights sum to one
     # an error of e in one quantity scales its term by exp(-k e^2), the others unchanged
     errors = {"pose": (q, 0.3), "velocity": (qd, 2.0)}
@@ -50,7 +46,7 @@ def test_kernel_terms_are_their_weights_on_the_reference_and_fall_as_documented(
         args = {"pose": (moved, qd), "velocity": (q, moved)}[name]
         out = tr.reward(*args, hip, np.array([0]), np.array([True]))[0]
         c = KERNEL_TERMS.index(name)
-        want = TRACKING_WEIGHTS[name] * np.exp(-TRACKING_KERNELS[name] * e**2)
+        want = TERMS[name].weight * np.exp(-TERMS[name].kernel * e**2)
         assert out[c] == pytest.approx(want)
         others = [k for k in range(len(KERNEL_TERMS)) if k != c]
         np.testing.assert_allclose(out[others], on[others])
@@ -58,22 +54,22 @@ def test_kernel_terms_are_their_weights_on_the_reference_and_fall_as_documented(
         moved = hip.copy()
         moved[0, col] += e
         out = tr.reward(q, qd, moved, np.array([0]), np.array([True]))[0]
-        want = TRACKING_WEIGHTS[name] * np.exp(-TRACKING_KERNELS[name] * e**2)
+        want = TERMS[name].weight * np.exp(-TERMS[name].kernel * e**2)
         assert out[KERNEL_TERMS.index(name)] == pytest.approx(want)
     # an angle off by a full turn is on the reference (wrapped)
     turned = q.copy()
     turned[0, 3] += 2 * np.pi
     out = tr.reward(turned, qd, hip, np.array([0]), np.array([True]))[0]
-    assert out[0] == pytest.approx(TRACKING_WEIGHTS["pose"])
+    assert out[0] == pytest.approx(TERMS["pose"].weight)
     # a period ended by an event earns its steps only
     dead = tr.reward(q, qd, hip, np.array([1]), np.array([False]))[0]
     np.testing.assert_array_equal(dead[:-2], 0.0)
-    assert dead[-2] == dead[-1] == TRACKING_STEP_BONUS
+    assert dead[-2] == dead[-1] == TERMS["step"].weight
 
 
 def test_env_reward_is_the_sum_of_the_tracking_terms_in_info():
-    env = gym.make("ConstrainedBiped-v0", reward="tracking", rsi=1.0, action="pd",
-                   pd_around="reference")  # fmt: skip
+    env = gym.make("ConstrainedBiped-v0", reward="tracking", rsi=1.0,
+                   action={"kind": "pd", "around": "reference"})  # fmt: skip
     env.reset(seed=1)
     seen = 0
     for _ in range(40):
@@ -91,11 +87,12 @@ def test_env_reward_is_the_sum_of_the_tracking_terms_in_info():
 def test_pd_targets_give_the_documented_torques(offset):
     off = np.zeros(5) if offset is None else np.array(offset)
     for around in ("fixed", "reference"):
-        env = ConstrainedBipedEnv(action="pd", pd_around=around, pd_range=0.5, pd_offset=offset)
+        env = ConstrainedBipedEnv(action={"kind": "pd", "around": around, "range": 0.5,
+                                          "offset": offset})  # fmt: skip
         env.reset(seed=3)
         st = env.state
-        pose = env.tracking.rows()[0, 1:6] if around == "reference" else PD_FIXED_POSE_RAD
-        rate = env.tracking.rows()[0, 7:12] if around == "reference" else 0.0
+        pose = env.core.tracking.rows()[0, 1:6] if around == "reference" else PD_FIXED_POSE_RAD
+        rate = env.core.tracking.rows()[0, 7:12] if around == "reference" else 0.0
         a = np.array([0.2, -0.4, 1.0, 0.0, -1.0], np.float32)
         _, _, _, _, info = env.step(a)
         target = pose + off + 0.5 * a.astype(np.float64)
@@ -110,7 +107,7 @@ def test_pd_targets_give_the_documented_torques(offset):
 
 @pytest.mark.parametrize(
     "kw",
-    [TRACK, {"action": "pd"}, {"action": "pd", "rsi": 0.3, "pd_offset": [0.2, 0, 0, 0, 0]}],
+    [TRACK, {"action": "pd"}, {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}, "rsi": 0.3}],
 )
 def test_tracking_options_single_equals_batched(kw):
     n = 5
@@ -149,10 +146,10 @@ def test_reference_state_starts_are_recorded_states_with_their_clock():
         assert k.size >= 1, "the start is not a recorded reference state"
         k = k[0]
         assert int(st.mode) == ref.mode[k] and info["mode"] == ref.mode[k]
-        c = env._clock
+        c = env.core.clock
         assert (c.first[0], c.mode[0], c.j[0]) == (bool(ref.first[k]), ref.mode[k], ref.j[k])
         first = ref.step[k] == 0  # the recording's first step, else the gait's phase
-        assert env.tracking.first[0] == first
+        assert env.core.tracking.first[0] == first
         np.testing.assert_array_equal(obs[26:], ref.lookup(first, ref.mode[k], ref.j[k])[:12])
         if first or ref.step[k] == ref.gait_step:
             np.testing.assert_array_equal(obs[26:], rows[k])
@@ -176,33 +173,33 @@ def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_sta
     # a mid-stride start with the mid-stride reference: the teacher's walk from such a start
     env = ConstrainedBipedEnv(reference_obs=True, phase_obs=True)
     obs, _ = env.reset(seed=0)
-    assert env.tracking.first[0] and env._clock.j[0] == 0 and env._clock.mode[0] == 2
-    np.testing.assert_array_equal(obs[26:], env.tracking.ref.tables[(1, 2)][0, :12])
+    assert env.core.tracking.first[0] and env.core.clock.j[0] == 0 and env.core.clock.mode[0] == 2
+    np.testing.assert_array_equal(obs[26:], env.core.tracking.ref.tables[(1, 2)][0, :12])
     for _ in range(400):  # the first step completes: the gait's phases from then on
         obs, _, term, _, info = env.step(np.zeros(5))
         if info["steps_completed"] or term:
             break
-    assert not env.tracking.first[0] or term
+    assert not env.core.tracking.first[0] or term
     # a mid-stride start with the rest reference: the gait's nearest state of model 2
     env = ConstrainedBipedEnv(start="mixed", reference_obs=True, phase_obs=True)
     for seed in range(10):
         obs, info = env.reset(seed=seed)
         if info["mode"] == 2:
             break
-    table = env.tracking.ref.tables[(0, 2)]
+    table = env.core.tracking.ref.tables[(0, 2)]
     j = int(np.argmin(np.sum((table[:, :6] - env.state.q) ** 2, axis=1)))
-    assert not env.tracking.first[0] and env._clock.j[0] == j
+    assert not env.core.tracking.first[0] and env.core.clock.j[0] == j
     np.testing.assert_array_equal(obs[26:], table[j, :12])
     assert obs[25] == pytest.approx(j * env.dt)  # the time in the model follows the clock
     # a start at rest with the rest reference: its first step
     env.reset(seed=0, options={"q": np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])})
-    assert env.tracking.first[0] and env._clock.j[0] == 0
+    assert env.core.tracking.first[0] and env.core.clock.j[0] == 0
 
 
 def test_default_env_is_unchanged_by_the_tracking_options_defaults():
     a = ConstrainedBipedEnv()
     b = ConstrainedBipedEnv(reward="env", action="torque", rsi=0.0, reference_obs=False)
-    assert a.tracking is None and a._clock is None
+    assert a.core.tracking is None and a.core.clock is None
     oa, _ = a.reset(seed=4)
     ob, _ = b.reset(seed=4)
     np.testing.assert_array_equal(oa, ob)
@@ -210,15 +207,21 @@ def test_default_env_is_unchanged_by_the_tracking_options_defaults():
     ra = a.step(tau)
     rb = b.step(tau)
     np.testing.assert_array_equal(ra[0], rb[0])
-    assert ra[1] == rb[1] and "track_pose" not in ra[4] and "torque" not in ra[4]
+    assert ra[1] == rb[1] and "reward_pose" not in ra[4] and "torque" not in ra[4]
 
 
 @pytest.mark.parametrize(
     "kw, name",
     [({"reward": "imitate"}, "reward"), ({"rsi": 1.5}, "rsi"), ({"action": "pos"}, "action"),
-     ({"pd_around": "teacher"}, "pd_around"), ({"pd_range": 0.0}, "pd_range"),
+     ({"action": {"kind": "pd", "around": "teacher"}}, "around"),
+     ({"action": {"kind": "pd", "range": 0.0}}, "range"),
      ({"reference": "backwards"}, "reference"), ({"reference_obs": 1}, "reference_obs"),
-     ({"pd_offset": [0.2, 0, 0, 0]}, "pd_offset"), ({"pd_offset": [1.5, 0, 0, 0, 0]}, "pd_offset")],
+     ({"action": {"kind": "pd", "offset": [0.2, 0, 0, 0]}}, "offset"),
+     ({"action": {"kind": "pd", "offset": [1.5, 0, 0, 0, 0]}}, "offset"),
+     ({"action": {"kind": "pd", "gain": 2.0}}, "gain_scale"),
+     ({"action": {"kind": "torque", "range": 0.5}}, "PD settings"),
+     ({"reward": {"kind": "tracking", "weights": {"pos": 1.0}}}, "pose"),
+     ({"reward": "tracking", "ctrl_cost_weight": 0.2}, "ctrl_cost_weight")],
 )  # fmt: skip
 def test_bad_tracking_options_are_refused_by_name(kw, name):
     with pytest.raises(ValueError, match=name):
@@ -233,7 +236,7 @@ def test_the_reference_clock_counts_its_own_periods_at_any_control_period():
     coarse = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0, dt=0.02).unwrapped
     for env in (fine, coarse):
         env.reset(seed=0)
-    tf, tc = fine.tracking, coarse.tracking
+    tf, tc = fine.core.tracking, coarse.core.tracking
     assert tc._per == 4.0 and tf._per == 1.0
     for j in (0, 3, 10):
         tf.clock.j[:] = 4 * j

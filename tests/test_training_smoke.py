@@ -186,15 +186,16 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     small += ["--out-dir", str(tmp_path)]
     config = "training/configs/ppo_from_scratch.toml"
     assert train_ppo.main(["--config", config, *small]) == 0
-    relu = ["--seed", "1", "--rsi", "0", "--activation", "relu"]
+    relu = ["--seed", "1", "--train-env", "rsi=0", "--activation", "relu"]
     assert train_ppo.main(["--config", config, *small, *relu]) == 0
     with pytest.raises(SystemExit, match="activation"):
         train_ppo.main(["--config", config, *small, "--activation", "sigmoid"])
     run0, run1 = sorted((tmp_path / "train_ppo").iterdir())
     cfg = read_config(run0)
-    assert cfg.action == "pd" and cfg.reward == "tracking" and cfg.rsi > 0
-    assert cfg.env_kwargs()["rsi"] == 0.0 and cfg.train_env_kwargs()["rsi"] == cfg.rsi
-    assert cfg.env_kwargs()["pd_offset"] == list(cfg.pd_offset) and cfg.pd_offset[0] > 0
+    s = cfg.settings()
+    assert s.action.pd and s.reward.kind == "tracking" and cfg.train_env["rsi"] > 0
+    assert cfg.env_kwargs()["rsi"] == 0.0 and cfg.train_env_kwargs()["rsi"] == 0.5
+    assert s.action.offset[0] > 0 and read_config(run1).train_env == {"rsi": 0}
     kinds = [{type(m).__name__ for m in load_policy(r)[0].modules()} for r in (run0, run1)]
     assert "Tanh" in kinds[0] and "ReLU" not in kinds[0] and "ReLU" in kinds[1]
     seen = []
@@ -211,8 +212,9 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     assert (tmp_path / "curves.png").stat().st_size > 0
     rows = json.loads(out.read_text())["rows"]
     assert [r["training_seed"] for r in rows] == [0, 1]
-    assert rows[1]["changes"] == "rsi=0.0, activation='relu'" and "PD" in rows[0]["in_the_loop"]
-    assert all(kw["action"] == "pd" and kw["rsi"] == 0.0 for kw in seen)
+    assert rows[1]["changes"] == "train_env.rsi=0, activation='relu'"
+    assert "PD" in rows[0]["in_the_loop"]
+    assert all(kw["action"]["kind"] == "pd" and kw["rsi"] == 0.0 for kw in seen)
 
 
 def test_train_ppo_help_explains_every_setting(capsys):
@@ -341,6 +343,37 @@ def test_bench_ppo_takes_train_ppo_flags_on_top_of_the_config():
     base = _config(DEFAULT_CONFIG)
     cfg = _config(DEFAULT_CONFIG, ["--net-arch", "64", "64", "--n-envs", "128"])
     assert cfg.net_arch == (64, 64) and cfg.n_envs == 128
-    assert cfg.pd_offset == base.pd_offset and cfg.n_steps == base.n_steps  # the rest: config
+    assert cfg.env == base.env and cfg.n_steps == base.n_steps  # the rest: the config's
     with pytest.raises(SystemExit):
         _config(DEFAULT_CONFIG, ["--net-arch", "64", "--no-such-flag", "1"])
+
+
+def test_sweep_assignments_reach_the_env_tables():
+    """``--grid env.dt=0.01,0.02``: an entry of a config's env table; plain keys stay fields."""
+    from training.sweep import parse_assignments
+
+    grid = parse_assignments(["env.dt=0.01,0.02", "learning_rate=1e-4"], "--grid", grid=True)
+    assert grid == {"env.dt": ["0.01", "0.02"], "learning_rate": ["1e-4"]}
+    for bad in ("env=1", "surprise=1", "train_env.=1"):
+        with pytest.raises(ValueError, match="not a settable"):
+            parse_assignments([bad], "--set", grid=False)
+
+
+def test_env_table_flags_go_on_top_of_the_config_table():
+    """``--env KEY=VALUE``: TOML values over the config file's [env] entries, checked by the
+    env's own settings check; the saved config holds the merged table."""
+    from training.common import parse_config, to_toml
+    from training.ppo_config import PPOConfig
+
+    cfg = parse_config(PPOConfig, ["--config", "training/configs/ppo_from_scratch.toml",
+                                   "--env", "dt=0.02", 'start="rest"'], "")  # fmt: skip
+    assert cfg.env["dt"] == 0.02 and cfg.env["start"] == "rest"
+    assert cfg.env["reward"] == "tracking" and cfg.train_env == {"rsi": 0.5}  # the file's
+    assert cfg.settings().dt == 0.02 and cfg.settings().action.pd
+    import tomllib
+
+    assert tomllib.loads(to_toml(cfg))["env"] == cfg.env  # round trip
+    with pytest.raises(SystemExit, match="dt must be"):
+        parse_config(PPOConfig, ["--env", "dt=-1"], "")
+    with pytest.raises(SystemExit, match="KEY=VALUE"):
+        parse_config(PPOConfig, ["--env", "dt"], "")

@@ -41,9 +41,9 @@ def policy(tmp_path, monkeypatch):
 
 def _config(run: Path, **changes) -> None:
     lines = (run / "config.toml").read_text().splitlines()
-    for key, value in changes.items():
+    for key, value in changes.items():  # top-level keys, before the [env] tables
         lines = [ln for ln in lines if not ln.startswith(f"{key} =")]
-        lines.append(f"{key} = {value}")
+        lines.insert(0, f"{key} = {value}")
     (run / "config.toml").write_text("\n".join(lines) + "\n")
 
 
@@ -224,15 +224,25 @@ def test_bad_state_files_are_refused(policy, tmp_path, state, match):
         ("gamma = inf\n", "gamma must be finite"),
         ("x = [\n", "not valid TOML"),
         ("# " + "a" * (2 << 20) + "\n", "more than the"),
+        ('[env]\nreference = "/tmp/x.npz"\n', "reference must be a shipped name"),
+        ("[env]\nimport_me = 1\n", "unknown argument(s) of ConstrainedBiped-v0: 'import_me'"),
+        ("[env]\ndt = -1\n", "[env]: dt must be"),
+        (
+            "[train_env]\nperturbations = {push_impulse_ns = 1e9, push_at_s = 1}\n",
+            "push_impulse_ns",
+        ),
+        ("env = 3\n", "env must be a table"),
     ],
 )
 def test_bad_configs_are_refused(policy, tmp_path, text, match):
     body = (policy / "config.toml").read_text()
-    if text.startswith(("surprise", "# ", "x = [")):
-        body += text
-    else:
+    if text.startswith(("[", "env =")):  # a table (or a key in its place) replaces them
+        body = body.split("\n[", 1)[0] + "\n" + (text if text.startswith("[") else "")
+    elif not text.startswith(("surprise", "# ", "x = [")):
         key = text.split(" =")[0]
-        body = "".join(ln + "\n" for ln in body.splitlines() if not ln.startswith(key)) + text
+        body = "".join(ln + "\n" for ln in body.splitlines() if not ln.startswith(key))
+    if not text.startswith("["):
+        body = text + body  # top-level keys go before the tables
     (policy / "config.toml").write_text(body)
     _refused(policy, match, tmp_path)
 
@@ -422,16 +432,22 @@ def test_an_imported_sb3_model_is_a_run_directory_that_evaluates(tmp_path, capsy
     from training.policy_io import main as policy_io_main
     from training.sb3_vec import make_sb3_vec_env
 
-    venv = VecNormalize(make_sb3_vec_env(2, 0, {}, "batched"))
+    venv = VecNormalize(make_sb3_vec_env(2, 0, {"task": "track", "dt": 0.02}, "batched"))
     model = PPO("MlpPolicy", venv, n_steps=32, batch_size=32, n_epochs=1, device="cpu")
     model.learn(64)
     model.save(tmp_path / "model.zip")
     venv.save(str(tmp_path / "vecnormalize.pkl"))
     out = tmp_path / "imported"
     argv = ["import-sb3", str(tmp_path / "model.zip"), "--out", str(out)]
-    assert policy_io_main([*argv, "--vecnormalize", str(tmp_path / "vecnormalize.pkl")]) == 0
+    argv += ["--vecnormalize", str(tmp_path / "vecnormalize.pkl")]
+    with pytest.raises(ValueError, match="observes 26 entries"):  # the env it trained in
+        policy_io_main(argv)
+    assert policy_io_main([*argv, "--env", 'task="track"', "dt=0.02"]) == 0
     assert "unpickles" in capsys.readouterr().err  # the warning
     assert (out / "config.toml").is_file() and (out / "final" / "manifest.json").is_file()
+    from training.policy_io import read_config
+
+    assert read_config(out).env == {"task": "track", "dt": 0.02}
     assert evaluate.main([str(out), "--episodes", "1", "--out", str(tmp_path / "ev")]) == 0
     assert (tmp_path / "ev" / "evaluation.json").is_file()
 

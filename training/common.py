@@ -61,7 +61,29 @@ def _coerce(kind: Any, value: Any, name: str) -> Any:
         if not isinstance(value, str):
             raise ValueError(f"{name} must be a string, got {value!r}")
         return value
+    if kind is dict:
+        if not isinstance(value, dict):
+            raise ValueError(f"{name} must be a table of key = value, got {value!r}")
+        return dict(value)
     return kind(value)
+
+
+def parse_assignment(item: str, flag: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` of a table flag (``--env dt=0.02``) as (key, value).
+
+    VALUE is read as a TOML value (a number, true/false, a [list], an {inline = table}), else
+    as a plain string.
+    """
+    import tomllib
+
+    key, sep, value = item.partition("=")
+    if not sep or not key.strip() or not value.strip():
+        raise ValueError(f"{flag} takes KEY=VALUE items, got {item!r}")
+    try:
+        parsed = tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        parsed = value.strip()
+    return key.strip(), parsed
 
 
 def config_from_mapping(cls: type[C], data: dict[str, Any], source: str) -> C:
@@ -122,7 +144,9 @@ def _parser(cls: type, description: str) -> argparse.ArgumentParser:
         flag = "--" + f.name.replace("_", "-")
         kind = hints[f.name]
         text = f"{helps.get(f.name, '')} (default: {f.default})".strip()
-        if getattr(kind, "__origin__", None) is tuple:
+        if kind is dict:  # a table: KEY=VALUE items on top of the config file's table
+            parser.add_argument(flag, nargs="+", default=None, help=text, metavar="KEY=VALUE")
+        elif getattr(kind, "__origin__", None) is tuple:
             elem = kind.__args__[0]
             parser.add_argument(
                 flag, nargs="+", type=elem, default=None, help=text, metavar=elem.__name__.upper()
@@ -154,11 +178,17 @@ def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> 
             values.update(read_toml(args.config))
         except UntrustedFileError as e:
             parser.error(f"--config: {e}")
-    for f in dataclasses.fields(cls):
-        v = getattr(args, f.name)
-        if v is not None:
-            values[f.name] = v
+    hints = get_type_hints(cls)
     try:
+        for f in dataclasses.fields(cls):
+            v = getattr(args, f.name)
+            if v is not None and hints[f.name] is dict:
+                flag = "--" + f.name.replace("_", "-")
+                table = dict(values.get(f.name, {}))
+                table.update(parse_assignment(item, flag) for item in v)
+                values[f.name] = table
+            elif v is not None:
+                values[f.name] = v
         return config_from_mapping(cls, values, str(args.config or "flags"))
     except ValueError as e:
         parser.error(str(e))
@@ -170,15 +200,31 @@ def given_flags(cls: type, argv: Sequence[str] | None) -> set[str]:
     return {f.name for f in dataclasses.fields(cls) if getattr(args, f.name) is not None}
 
 
+def toml_value(v: Any) -> str:
+    """One TOML value: a string, number, boolean, path, list/tuple or dict (inline table)."""
+    if isinstance(v, dict):
+        items = (f"{k} = {toml_value(x)}" for k, x in v.items() if x is not None)
+        return "{" + ", ".join(items) + "}"
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, Path):
+        v = str(v)
+    if isinstance(v, float) and not math.isfinite(v):
+        raise ValueError(f"TOML has no {v}")
+    return json.dumps(v)
+
+
 def to_toml(cfg: Any) -> str:
-    """Resolved config as TOML text (flat; strings, numbers, booleans, paths, tuples)."""
-    lines = []
+    """Resolved config as TOML text: the plain fields, then each dict field as a [table]."""
+    lines, tables = [], []
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if isinstance(v, Path):
-            v = str(v)
-        lines.append(f"{f.name} = {json.dumps(list(v) if isinstance(v, tuple) else v)}")
-    return "\n".join(lines) + "\n"
+        if isinstance(v, dict):
+            tables += ["", f"[{f.name}]"] + [f"{k} = {toml_value(x)}" for k, x in v.items()
+                                              if x is not None]  # fmt: skip
+        else:
+            lines.append(f"{f.name} = {toml_value(v)}")
+    return "\n".join(lines + tables) + "\n"
 
 
 def versions() -> dict[str, str | bool]:

@@ -33,9 +33,23 @@ IGNORED = {"seed", "out_dir", "resume", "progress", "total_timesteps"}
 
 
 def differences(cfg, base) -> str:
-    """The config fields where ``cfg`` differs from ``base`` (``name=value``, comma-separated)."""
-    a, b = asdict(cfg), asdict(base)
-    diff = [f"{k}={a[k]!r}" for k in a if k not in IGNORED and a[k] != b[k]]
+    """The config fields where ``cfg`` differs from ``base`` (``name=value``, comma-separated).
+
+    A table's entries are compared one by one (``train_env.rsi=0``).
+    """
+
+    def flat(c) -> dict:
+        out = {}
+        for k, v in asdict(c).items():
+            if isinstance(v, dict):
+                out.update({f"{k}.{key}": x for key, x in v.items()})
+            else:
+                out[k] = v
+        return out
+
+    a, b = flat(cfg), flat(base)
+    keys = [k for k in a if k not in IGNORED] + [k for k in b if k not in a]
+    diff = [f"{k}={a.get(k)!r}" for k in keys if a.get(k) != b.get(k)]
     return ", ".join(diff) or "-"
 
 
@@ -43,7 +57,7 @@ def evaluate_run(run: Path, which: str, seeds: list[int]) -> dict:
     """One run's snapshot on ``seeds``: the summary of :func:`training.rollouts.summarize`."""
     policy, norm, cfg, state = load_policy(run, which)
     start = cfg.evaluation_start()
-    cfg = replace(cfg, start=start)
+    cfg = replace(cfg, env={**cfg.env, "start": start})
     eps = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), seeds, cfg.env_id)
     row = summarize(f"{run.name} ({which})", eps)
     row.update(num_timesteps=int(state.get("num_timesteps", 0)), start=start)

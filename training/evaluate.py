@@ -45,8 +45,7 @@ from training.policy_io import (
 )
 from training.ppo_config import REPORT_EPISODES, REPORT_SEED_OFFSET
 from training.rollouts import (
-    PUSH_HIP_DV_M_S,
-    PUSH_TIME_S,
+    COMPARE_PUSH,
     TABLE_HEADER,
     initiation,
     run_episodes,
@@ -186,7 +185,7 @@ def _rest_rows(batch, cfg, seeds) -> tuple[list[dict], str]:
 
     spec = cfg.teacher if "+" in cfg.teacher else TEACHER  # a teacher with its start phase
     kw = {**cfg.env_kwargs(), "start": "rest"}
-    noisy = {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]}
+    noisy = {**kw, "reset_noise_scale": 3 * cfg.settings().start.reset_noise_scale}
     rows = []
     who = (("policy", lambda: batch), (f"model controller ({spec!r})",
            lambda: controller_batch(spec, len(seeds))))  # fmt: skip
@@ -197,22 +196,16 @@ def _rest_rows(batch, cfg, seeds) -> tuple[list[dict], str]:
     return rows, spec
 
 
-PUSH_EPISODES = 20
-"""Episodes of the ``--compare`` push rows (single env: the push is applied between periods)."""
-
-
 def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> list[dict]:
     """The ``--compare`` rows: stresses of the policy, imitation alone, teacher, Table 2."""
     from training.model_controller import controller_from
 
     kw = cfg.env_kwargs()
-    noisy = {**kw, "reset_noise_scale": 3 * kw["reset_noise_scale"]}
-    few = seeds[:PUSH_EPISODES]
+    noisy = {**kw, "reset_noise_scale": 3 * cfg.settings().start.reset_noise_scale}
+    pushed = {**kw, "perturbations": COMPARE_PUSH}
+    what = f"push {COMPARE_PUSH['push_impulse_ns']} N s at {COMPARE_PUSH['push_at_s']} s"
     rows = [batched_row("policy, 3x reset noise", batch, noisy, seeds, cfg.env_id)]
-    rows.append(summarize(
-        f"policy, push {PUSH_HIP_DV_M_S} m/s at {PUSH_TIME_S} s",
-        run_episodes(actor, kw, few, cfg.env_id, push_at_s=PUSH_TIME_S, desc="push"),
-    ))  # fmt: skip
+    rows.append(batched_row(f"policy, {what}", batch, pushed, seeds, cfg.env_id))
     if available(run_dir, "imitation"):
         policy, norm, _, _ = load_policy(run_dir, "imitation")
         rows.append(
@@ -234,11 +227,8 @@ def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> lis
             cfg.env_id,
         )
     )
-    rows.append(summarize(
-        f"model controller, push {PUSH_HIP_DV_M_S} m/s",
-        run_episodes(controller_from(spec), kw, few, cfg.env_id, push_at_s=PUSH_TIME_S,
-                     desc="controller, push"),
-    ))  # fmt: skip
+    rows.append(batched_row(f"model controller, {what}", controller_batch(spec, len(seeds)),
+                            pushed, seeds, cfg.env_id))  # fmt: skip
     rest, spec = _rest_rows(batch, cfg, seeds)
     rows += rest
     rest_strip(controller_from(spec), cfg, out_dir / "figures" / "rest_start_teacher.png",
@@ -305,11 +295,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     cfg = loop["cfg"]
     start = args.start or cfg.evaluation_start()
-    cfg = replace(cfg, start=start)
+    env = {**cfg.env, "start": start}
     if args.dt is not None:
-        cfg = replace(cfg, dt=args.dt)
+        env["dt"] = args.dt
     if args.hold:
-        cfg = replace(cfg, hold_torques=True)
+        env["stop_at_switch"] = False
+    cfg = replace(cfg, env=env)
     loop["cfg"] = cfg
     name = args.run_dir.resolve().name if args.run_dir else args.controller.replace(":", "_")
     out = args.out or Path("runs") / "evaluate" / f"{name}_{args.which}_{start}"

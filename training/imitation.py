@@ -78,7 +78,7 @@ def collect(
     """
     rng = rng or np.random.default_rng(0)
     gear = np.asarray(gear, dtype=np.float64)
-    limit = env.torque_limit_nm
+    limit = env.settings.action.torque_limit_nm
     obs_l, act_l, steps, ends = [], [], [], []
     for seed in progress(seeds) if progress else seeds:
         obs, info = env.reset(seed=int(seed))

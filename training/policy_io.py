@@ -370,7 +370,8 @@ def build_policy(cfg, observation_space=None):
     from biped_constraint_env.observation import observation_space as env_obs_space
 
     if observation_space is None:
-        observation_space = env_obs_space(cfg.phase_obs, cfg.reference_obs)
+        o = cfg.settings().observation
+        observation_space = env_obs_space(o.phase_obs, o.reference_obs)
     act_space = spaces.Box(-1.0, 1.0, (5,), np.float32)
     return ActorCriticPolicy(
         observation_space, act_space, lambda _: 0.0, use_sde=cfg.use_sde, **cfg.policy_kwargs()
@@ -452,14 +453,19 @@ def policy_batch_actor(policy, normalizer: ObsNormalizer, cfg):
 
 # ------------------------------------------------------------------------- SB3 zips
 def import_sb3_zip(
-    zip_path: Path, vecnormalize_pkl: Path | None, out: Path, state: dict | None = None
+    zip_path: Path,
+    vecnormalize_pkl: Path | None,
+    out: Path,
+    state: dict | None = None,
+    env: dict | None = None,
 ) -> None:
     """Convert a Stable-Baselines3 ``model.zip`` (+ ``vecnormalize.pkl``) to a run directory.
 
     ``out`` receives ``config.toml`` (the network's architecture, read from the model, and
-    the observation it takes) and the snapshot ``final/``, so that
-    ``python -m training.evaluate OUT`` runs it. The model's actions in [-1, 1] are taken as
-    torques / 150 N m (``make_sb3_vec_env``'s mapping). This loads the SB3 files, which
+    ``env``: the keyword arguments of the env it was trained in, ``[env]``) and the snapshot
+    ``final/``, so that ``python -m training.evaluate OUT`` runs it. The model's actions in
+    [-1, 1] are taken as ``make_sb3_vec_env`` maps them (torques / 150 N m; PD targets as they
+    are). The model's observation size must be that env's. This loads the SB3 files, which
     unpickles them: it prints :data:`SB3_PICKLE_WARNING` first. Use it only on files you
     trust; the directory it writes loads without pickle.
     """
@@ -472,6 +478,21 @@ def import_sb3_zip(
 
     print(SB3_PICKLE_WARNING.format(path=zip_path), file=sys.stderr, flush=True)
     model = PPO.load(zip_path, device="cpu")
+    pol = model.policy
+    arch = pol.net_arch["pi"] if isinstance(pol.net_arch, dict) else pol.net_arch
+    act = [a for a in ACTIVATIONS if activation_fn(a) is pol.activation_fn]
+    n_obs = pol.observation_space.shape[0]
+    cfg = replace(
+        PPOConfig(), env=dict(env or {}), net_arch=tuple(arch), activation=act[0] if act else "",
+        use_sde=bool(model.use_sde), total_timesteps=int(model.num_timesteps),
+    )  # fmt: skip
+    if not act or pol.action_space.shape != (5,):
+        raise ValueError(f"{zip_path}: not a ConstrainedBiped-v0 MlpPolicy of this package's kind")
+    if n_obs != cfg.obs_dim():
+        raise ValueError(
+            f"{zip_path}: observes {n_obs} entries, the env {cfg.env} gives "
+            f"{cfg.obs_dim()}; give the env it was trained in (--env KEY=VALUE)"
+        )
     vecnorm = None
     if vecnormalize_pkl is not None:
         from stable_baselines3.common.vec_env import VecNormalize
@@ -479,23 +500,9 @@ def import_sb3_zip(
         from training.sb3_vec import make_sb3_vec_env
 
         print(SB3_PICKLE_WARNING.format(path=vecnormalize_pkl), file=sys.stderr, flush=True)
-        vecnorm = VecNormalize.load(str(vecnormalize_pkl), make_sb3_vec_env(1, 0, {}, "dummy"))
-    pol = model.policy
-    arch = pol.net_arch["pi"] if isinstance(pol.net_arch, dict) else pol.net_arch
-    act = [a for a in ACTIVATIONS if activation_fn(a) is pol.activation_fn]
-    n_obs = pol.observation_space.shape[0]
-    dims = {PPOConfig(phase_obs=p, reference_obs=r).obs_dim(): (p, r) for p in (0, 1)
-            for r in (0, 1)}  # fmt: skip
-    if not act or n_obs not in dims or pol.action_space.shape != (5,):
-        raise ValueError(f"{zip_path}: not a ConstrainedBiped-v0 MlpPolicy of this package's kind")
+        vecnorm = VecNormalize.load(str(vecnormalize_pkl), make_sb3_vec_env(1, 0, cfg.env, "dummy"))
     if vecnorm is None or not vecnorm.norm_obs:
         raise ValueError(f"{zip_path}: give its --vecnormalize (observation statistics)")
-    phase, ref = dims[n_obs]
-    cfg = replace(
-        PPOConfig(), net_arch=tuple(arch), activation=act[0], phase_obs=bool(phase),
-        reference_obs=bool(ref), use_sde=bool(model.use_sde),
-        total_timesteps=int(model.num_timesteps),
-    )  # fmt: skip
     cfg.validate()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -515,8 +522,18 @@ def main(argv: list[str] | None = None) -> int:
     imp.add_argument("model_zip", type=Path)
     imp.add_argument("--vecnormalize", type=Path, required=True, help="its VecNormalize pickle")
     imp.add_argument("--out", type=Path, required=True, help="run directory to write")
+    imp.add_argument(
+        "--env",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="the env it was trained in (gym.make's kwargs as TOML values)",
+    )
     a = ap.parse_args(argv)
-    import_sb3_zip(a.model_zip, a.vecnormalize, a.out)
+    from training.common import parse_assignment
+
+    env = dict(parse_assignment(item, "--env") for item in a.env)
+    import_sb3_zip(a.model_zip, a.vecnormalize, a.out, env=env)
     print(f"wrote {a.out}")
     return 0
 

@@ -7,7 +7,7 @@ after each field is its ``--help`` text.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,23 +18,11 @@ class PPOConfig:
     """PPO settings (numbers that differ from SB3's defaults say why)."""
 
     env_id: str = "ConstrainedBiped-v0"  # Gymnasium id of the env
-    task: str = "walk"  # the env's task ("walk", "track" or "paper"; "track" sets the tracking
-    # fields below that are left at their defaults to the env's track task's values)
-    preset: str = "default"  # the env's physics preset; evaluation uses the same
-    start: str = "midstride"  # the env's start: "midstride", "rest" (Fig. 2) or "mixed" (both)
-    dt: float = 0.0  # the env's control period [s] (0: the task's, 5 ms for "walk")
-    hold_torques: bool = False  # hold the action through model switches (stop_at_switch off)
-    phase_obs: bool = False  # observe the contact clock: first-step flag, time in the model
-    reward: str = "env"  # the env's reward: "env" (its own) or "tracking" (of the reference)
-    reference: str = ""  # the reference motion ("" = the env's choice for the start)
-    rsi: float = 0.0  # fraction of training resets at reference states (never in evaluation)
-    action: str = "torque"  # the env's action: "torque" or "pd" (PD targets)
-    pd_around: str = "fixed"  # PD targets about the "fixed" rest pose or the "reference" pose
-    pd_range: float = 1.0  # half-range of the PD targets [rad]
-    pd_gain_scale: float = 1.0  # the PD gains' scale (Kp x it, Kd x its square root)
-    pd_pose: tuple[float, ...] = ()  # q1..q5 of the fixed PD pose [rad] (() = the env's)
-    pd_offset: tuple[float, ...] = ()  # constant offset of the PD targets q1..q5 [rad] (() = 0)
-    reference_obs: bool = False  # observe the reference's q and q-dot at the clock
+    env: dict = field(default_factory=dict)  # [env] table: gym.make's keyword arguments, the
+    # env the policy runs in (evaluations start as it does: no reference-state starts);
+    # flags: --env KEY=VALUE ... (TOML values) on top of the file's table
+    train_env: dict = field(default_factory=dict)  # [train_env] table: what the training env
+    # changes on top of [env] (reference-state starts, pushes, randomised models...)
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
@@ -69,13 +57,6 @@ class PPOConfig:
     select_by: str = "mean"  # best/ is the evaluation with the most steps: "mean" or "min"
     # (the fewest steps of its episodes first, then the mean)
     checkpoint_freq: int = 250_000  # env steps between checkpoints (resume continues there)
-    reset_noise_scale: float = 0.01  # the env's reset noise [rad]
-    fall_hip_height_m: float = 0.0  # > 0: end episodes when the hip is below it [m] (0 = off)
-    forward_reward_weight: float = 1.0  # the env's reward weights (its defaults)
-    alive_bonus: float = 0.5  # the env's alive bonus
-    switch_bonus: float = 1.0  # the env's bonus per forward model switch
-    step_bonus: float = 5.0  # the env's bonus per completed walking step
-    ctrl_cost_weight: float = 0.1  # the env's torque cost weight
     base_controller: str = ""  # "model": learn a residual on the model controller ("" = none)
     gear: tuple[float, ...] = (150.0,)  # N m per unit action, one value or one per joint
 
@@ -103,18 +84,6 @@ class PPOConfig:
     resume: str = ""  # a run directory to continue (to its own saved total)
     progress: bool = True  # progress bars
 
-    def __post_init__(self) -> None:
-        """Take the env task's learning settings where this config leaves the defaults.
-
-        The fields mirror the env's arguments (the action map and the observation size
-        depend on them), so ``task="track"`` must set them here as it does in the env.
-        """
-        from biped_constraint_env.tasks import TASK_DEFAULTS, TASKS
-
-        for name, value in TASKS.get(self.task, {}).items():
-            if name in TASK_DEFAULTS and getattr(self, name) == _BASE[name]:
-                setattr(self, name, tuple(value) if isinstance(value, tuple) else value)
-
     def validate(self) -> None:
         """Refuse a value out of its range or choices (ValueError naming the flag)."""
         for name, lo, hi in _RANGES:
@@ -130,8 +99,6 @@ class PPOConfig:
                 )
         for name, sizes in (
             ("gear", (1, 5)),
-            ("pd_pose", (0, 5)),
-            ("pd_offset", (0, 5)),
             ("log_std_joints", (0, 5)),
             ("net_arch", tuple(range(1, 9))),
         ):
@@ -139,6 +106,19 @@ class PPOConfig:
                 raise ValueError(f"--{_flag(name)} takes {' or '.join(map(str, sizes))} values")
         if self.batch_size > self.n_steps * self.n_envs:
             raise ValueError("--batch-size must be at most --n-steps x --n-envs")  # fmt: skip
+        from biped_constraint_env.reference import REFERENCES
+        from biped_constraint_env.settings import make_settings
+
+        for table in ("env", "train_env"):  # shipped references only: a config names no file
+            ref = getattr(self, table).get("reference")
+            if ref is not None and ref not in REFERENCES:
+                raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES}, "
+                                 f"got {ref!r}")  # fmt: skip
+        for name, kwargs in (("env", self.env_kwargs()), ("train_env", self.train_env_kwargs())):
+            try:
+                make_settings(**kwargs)
+            except (ValueError, TypeError) as e:
+                raise ValueError(f"[{name}]: {e}") from None
 
     def check_untrusted(self) -> None:
         """Refuse what a config from anywhere must not name (a loaded run's config.toml).
@@ -166,58 +146,32 @@ class PPOConfig:
             raise ValueError(f"resume must be empty in a saved config, got {self.resume!r}")
 
     def env_kwargs(self) -> dict:
-        """Keyword arguments of the env."""
-        return {
-            "task": self.task,
-            "preset": self.preset,
-            "start": self.start,
-            "reset_noise_scale": self.reset_noise_scale,
-            "step_bonus": self.step_bonus,
-            "forward_reward_weight": self.forward_reward_weight,
-            "alive_bonus": self.alive_bonus,
-            "switch_bonus": self.switch_bonus,
-            "ctrl_cost_weight": self.ctrl_cost_weight,
-            "rsi": 0.0,  # evaluations start as the env does (train_env_kwargs adds the rsi)
-            **({"fall_hip_height_m": self.fall_hip_height_m} if self.fall_hip_height_m > 0 else {}),
-            **({"dt": self.dt} if self.dt > 0 else {}),
-            **({"stop_at_switch": False} if self.hold_torques else {}),
-            **({"phase_obs": True} if self.phase_obs else {}),
-            **({"reward": self.reward} if self.reward != "env" else {}),
-            **({"reference": self.reference} if self.reference else {}),
-            **(
-                {
-                    "action": "pd",
-                    "pd_around": self.pd_around,
-                    "pd_range": self.pd_range,
-                    "pd_gain_scale": self.pd_gain_scale,
-                    **({"pd_pose": list(self.pd_pose)} if self.pd_pose else {}),
-                    **({"pd_offset": list(self.pd_offset)} if self.pd_offset else {}),
-                }  # fmt: skip
-                if self.action == "pd"
-                else {}
-            ),
-            **({"reference_obs": True} if self.reference_obs else {}),
-        }
+        """Keyword arguments of the env the policy runs in: ``[env]``, with its own starts.
 
-    def evaluation_start(self) -> str:
-        """The start evaluations use: the config's, mid-stride for one trained on both."""
-        return "midstride" if self.start == "mixed" else self.start
+        ``rsi`` is 0: a task's reference-state starts are for training.
+        """
+        return {**self.env, "rsi": 0.0}
 
     def train_env_kwargs(self) -> dict:
-        """Keyword arguments of the training env: :meth:`env_kwargs` with ``rsi``.
+        """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top."""
+        return {**self.env, **self.train_env}
 
-        Evaluations use :meth:`env_kwargs`: the env's own start distribution.
-        """
-        return {**self.env_kwargs(), **({"rsi": self.rsi} if self.rsi > 0 else {})}
+    def settings(self):
+        """The validated settings of the env the policy runs in (:mod:`biped_constraint_env`)."""
+        from biped_constraint_env.settings import make_settings
+
+        return make_settings(**self.env_kwargs())
+
+    def evaluation_start(self) -> str:
+        """The start evaluations use: the env's, mid-stride for one trained on both."""
+        start = self.settings().start.start
+        return "midstride" if start == "mixed" else start
 
     def train_max_episode_steps(self) -> int | None:
         """The training episodes' time limit in control periods (None: the env's)."""
         if self.train_episode_s <= 0:
             return None
-        from biped_constraint_env.tasks import TASKS
-
-        dt = self.dt if self.dt > 0 else TASKS[self.task]["dt"]
-        return max(1, round(self.train_episode_s / dt))
+        return max(1, round(self.train_episode_s / self.settings().dt))
 
     def action_map(self):
         """Policy action -> env action.
@@ -227,7 +181,7 @@ class PPOConfig:
         """
         from training.sb3_vec import ActionMap, action_map_from
 
-        if self.action == "pd":
+        if self.settings().action.pd:
             return ActionMap(1.0, None, 1.0)
 
         gear = self.gear[0] if len(self.gear) == 1 else self.gear
@@ -237,13 +191,14 @@ class PPOConfig:
         """What acts at run time: the network alone, or with a PD law or a controller."""
         if self.base_controller:
             return f"network residual on the controller {self.base_controller!r}"
-        if self.action == "pd" and self.pd_around == "reference":
+        s = self.settings()
+        if s.action.pd and s.action.around == "reference":
             what = "network + PD about the reference pose at the contact clock"
-        elif self.action == "pd":
+        elif s.action.pd:
             what = "network alone (PD targets about a fixed pose)"
         else:
             what = "network alone (torques)"
-        if self.reference_obs:
+        if s.observation.reference_obs:
             what += ", the reference state in its input"
         return what
 
@@ -251,7 +206,8 @@ class PPOConfig:
         """The observation's length (24; + 2 phase entries; + 12 reference entries)."""
         from biped_constraint_env.observation import observation_space
 
-        return observation_space(self.phase_obs, self.reference_obs).shape[0]
+        o = self.settings().observation
+        return observation_space(o.phase_obs, o.reference_obs).shape[0]
 
     def policy_kwargs(self) -> dict:
         """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.
@@ -279,13 +235,9 @@ class PPOConfig:
 
 ACTIVATIONS = ("tanh", "relu", "elu")
 
-_BASE = {"reward": "env", "rsi": 0.0, "action": "torque", "pd_around": "fixed",
-         "pd_offset": (), "phase_obs": False}  # fmt: skip
-"""The dataclass defaults of the fields a task may set (see ``PPOConfig.__post_init__``)."""
 _BIG = 10**12
 _RANGES = (  # (field, min, max): every number a config or flag may set
-    ("dt", 0.0, 0.1), ("rsi", 0.0, 1.0), ("pd_range", 0.0, 3.2), ("pd_gain_scale", 0.0, 100.0),
-    ("pd_pose", -3.2, 3.2), ("pd_offset", -3.2, 3.2), ("train_episode_s", 0.0, 1e4),
+    ("train_episode_s", 0.0, 1e4),
     ("seed", 0, 2**31 - 1), ("total_timesteps", 0, _BIG), ("n_envs", 1, 4096),
     ("env_threads", 1, 256), ("n_steps", 1, 1 << 20), ("batch_size", 1, 1 << 24),
     ("n_epochs", 1, 1000), ("learning_rate", 0.0, 1.0), ("target_kl", 0.0, 10.0),
@@ -293,9 +245,6 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("ent_coef", -1.0, 10.0), ("log_std_init", -20.0, 5.0), ("sde_sample_freq", -1, _BIG),
     ("net_arch", 1, 4096), ("torch_threads", 1, 256), ("update_threads", 0, 256),
     ("eval_freq", 1, _BIG), ("eval_episodes", 1, 100_000), ("checkpoint_freq", 1, _BIG),
-    ("reset_noise_scale", 0.0, 1.0), ("fall_hip_height_m", 0.0, 10.0),
-    ("forward_reward_weight", -1e6, 1e6), ("alive_bonus", -1e6, 1e6),
-    ("switch_bonus", -1e6, 1e6), ("step_bonus", -1e6, 1e6), ("ctrl_cost_weight", -1e6, 1e6),
     ("gear", 1e-6, 1e4), ("bc_episodes0", 0, 1_000_000), ("bc_noise_nm", 0.0, 150.0),
     ("bc_rounds", 0, 10_000), ("bc_episodes", 0, 1_000_000), ("bc_periods0", 1, 1_000_000),
     ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
@@ -310,18 +259,9 @@ def _flag(name: str) -> str:
 
 def _choices() -> dict[str, tuple]:
     from biped_constraint_env import ENV_ID
-    from biped_constraint_env.reference import REFERENCES
-    from biped_constraint_env.tasks import PRESETS, TASKS
 
     return {
         "env_id": (ENV_ID,),  # the registered id only: "module:Id" would import module
-        "task": tuple(TASKS),
-        "preset": tuple(PRESETS),
-        "start": ("midstride", "rest", "mixed"),
-        "reward": ("env", "tracking"),
-        "reference": ("", *REFERENCES),
-        "action": ("torque", "pd"),
-        "pd_around": ("fixed", "reference"),
         "vec": ("batched", "subproc", "dummy"),
         "lr_schedule": ("constant", "linear"),
         "select_by": ("mean", "min"),

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.env import ConstrainedBipedEnv
+from biped_constraint_env.observation import OBS_HIP
 from biped_constraint_env.reference import DATA_DIR, REFERENCES, save_reference
 from training.model_controller import TEACHER, controller_from
 
@@ -41,7 +42,7 @@ def record(
         st = env.state
         rows["q"].append(st.q.copy())
         rows["qd"].append(st.qd.copy())
-        rows["hip"].append(obs[12:16].copy())
+        rows["hip"].append(obs[OBS_HIP].copy())
         rows["mode"].append(info["mode"])
         rows["j"].append(j)
         rows["step"].append(info["steps_completed"])

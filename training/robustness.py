@@ -48,7 +48,10 @@ def run(make_actor, env_kwargs: dict, seeds, env_id: str, label: str) -> list[di
     from training.evaluate import batched_row
 
     rows = []
-    for group, name, extra in conditions(env_kwargs.get("reset_noise_scale", 0.01)):
+    from biped_constraint_env.settings import make_settings
+
+    noise = make_settings(**env_kwargs).start.reset_noise_scale
+    for group, name, extra in conditions(noise):
         kw = {**env_kwargs, **extra}
         if "perturbations" in extra and "perturbations" in env_kwargs:
             kw["perturbations"] = {**env_kwargs["perturbations"], **extra["perturbations"]}

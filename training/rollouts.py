@@ -1,4 +1,4 @@
-"""Seeded episodes of a controller in the env, their summary, and the push perturbation.
+"""Seeded episodes of a controller in the env, and their summary.
 
 Shared by :mod:`training.evaluate`, :mod:`training.train_ppo` (periodic evaluations) and the
 imitation pipeline; a controller is any callable obs (24,) -> torques (5,) [N m].
@@ -15,47 +15,15 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from biped_constraint_env.model import N_LINKS
+from biped_constraint_env.observation import OBS_FORCES
 from training.stats import format_success, success
 
 JOINT_RATES = slice(N_LINKS + 1, 2 * N_LINKS)
 """The joint rates q-dot 1..5 in the observation (the cost of transport's work)."""
 
-PUSH_HIP_DV_M_S = (-0.3, 0.0)
-"""The push of ``--compare``: a sudden change of the hip's velocity (y, z) [m/s] (backward),
-applied once, 2 s into the episode, through the constraint-consistent joint rates."""
-PUSH_TIME_S = 2.0
-
-
-def push(env, dv=PUSH_HIP_DV_M_S) -> None:
-    """Change the hip's velocity by ``dv`` (y, z) [m/s] at once, keeping the model's contacts.
-
-    The joint rates change by the least-norm solution of J_hip dqd = dv among the rates that
-    keep the current model's contacts (theta0 frozen in models 1 and 4, the point contact of
-    models 3 and 4 at rest); the state is set in the simulator directly.
-    """
-    from biped_constraint_env.kinematics import nb_point_jacobian
-    from biped_constraint_env.model import SC_HEEL5, SC_TOE5
-
-    u = env.unwrapped
-    st = u.state
-    ch = u.params.chain(st.stance_side)
-    J_hip = nb_point_jacobian(ch.packed, st.q, 3, 0.0)
-    rows = [J_hip[0], J_hip[1]]
-    rhs = [dv[0], dv[1]]
-    mode = int(st.mode)
-    if mode in (1, 4):
-        e = np.zeros(6)
-        e[0] = 1.0
-        rows.append(e)
-        rhs.append(0.0)
-    if mode in (3, 4):  # the swing foot's heel (3) or toe (4) stays on the ground
-        s = float(ch.packed_scalars[SC_HEEL5 if mode == 3 else SC_TOE5])
-        J = nb_point_jacobian(ch.packed, st.q, 5, s)
-        rows += [J[0], J[1]]
-        rhs += [0.0, 0.0]
-    A = np.array(rows)
-    dq = np.linalg.lstsq(A, np.array(rhs), rcond=None)[0]
-    u._sim.qd[0] = st.qd + dq
+COMPARE_PUSH = {"push_impulse_ns": -0.25, "push_at_s": 2.0}
+"""The push of ``--compare``: a backward hip impulse of 0.25 N s (about -0.3 m/s), 2 s into
+the episode (the env's ``perturbations`` option: through the constrained impulse map)."""
 
 
 def run_episodes(
@@ -64,13 +32,12 @@ def run_episodes(
     seeds: Sequence[int],
     env_id: str = "ConstrainedBiped-v0",
     record=None,
-    push_at_s: float | None = None,
     desc: str = "",
 ) -> list[dict]:
     """Run one episode per seed; per episode: steps, distance, speed, torque cost, end.
 
     ``record(env, episode_index)`` is called before every step if given (frames for figures).
-    ``push_at_s``: apply :func:`push` once at that time [s]. Torque cost: the integral of
+    Torque cost: the integral of
     sum(tau^2) dt over the episode per metre of hip travel [N^2 m s].
     """
     import gymnasium as gym
@@ -86,15 +53,12 @@ def run_episodes(
         obs, info = env.reset(seed=int(seed))
         if hasattr(actor, "reset"):  # a controller with per-episode memory (a start phase)
             actor.reset()
-        y0, t_prev, cost, ret, done, pushed = info["hip_y"], 0.0, 0.0, 0.0, False, False
+        y0, t_prev, cost, ret, done = info["hip_y"], 0.0, 0.0, 0.0, False
         work = 0.0
         steps, step_t, step_hip, first_m = 0, [], [], None
         while not done:
             if record:
                 record(env, k)
-            if push_at_s is not None and not pushed and info["t"] >= push_at_s:
-                push(env)
-                pushed = True
             tau = actor(obs)
             obs, r, term, trunc, info = env.step(tau)
             applied = info.get("torque", tau)  # PD-target actions: the torques they gave
@@ -320,9 +284,8 @@ def com_and_cop(env) -> tuple[np.ndarray, float]:
     m = np.array([link.mass_kg for link in links])
     mid = np.array([(pts[a] + pts[b]) / 2 for a, b in segments])
     com = (m[:, None] * mid).sum(axis=0) / m.sum()
-    obs = u._obs[0]
     point = "swing_heel" if int(st.mode) == 3 else "swing_toe"
-    f = np.array([obs[21], obs[22], obs[23]])
+    f = u.core.buf.obs[0, OBS_FORCES]
     y = np.array([pts["stance_toe"][0], pts["stance_heel"][0], pts[point][0]])
     cop = float((f * y).sum() / f.sum()) if f.sum() > 1e-9 else float("nan")
     return com, cop

@@ -83,11 +83,11 @@ def make_sb3_vec_env(
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import biped_constraint_env  # noqa: F401
-    from biped_constraint_env.tasks import resolve_task
+    from biped_constraint_env.settings import make_settings
 
-    limit = float(env_kwargs.get("torque_limit_nm", TORQUE_LIMIT_NM))
-    task = resolve_task(env_kwargs.get("task", "walk"), action=env_kwargs.get("action"))
-    if task["action"] == "pd":  # the env's actions are PD targets in [-1, 1] (task "track" too)
+    settings = make_settings(**env_kwargs)
+    limit = settings.action.torque_limit_nm
+    if settings.action.pd:  # the env's actions are PD targets in [-1, 1] (task "track" too)
         if action_map is not None and (action_map.base is not None or action_map.limit != 1.0):
             raise ValueError("PD-target actions take ActionMap(1.0, None, 1.0): no gear, no base")
         action_map = action_map or ActionMap(1.0, None, 1.0)

@@ -32,7 +32,11 @@ METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
 
 
 def parse_assignments(items: list[str], flag: str, grid: bool) -> dict[str, list[str] | str]:
-    """``key=value`` (``--set``) or ``key=v1,v2`` (``--grid``) items; the keys are PPOConfig's."""
+    """``key=value`` (``--set``) or ``key=v1,v2`` (``--grid``) items.
+
+    The keys are PPOConfig's fields, or ``env.KEY`` / ``train_env.KEY`` for an entry of its
+    env tables (``--grid env.dt=0.01,0.02``).
+    """
     from dataclasses import fields
 
     from training.ppo_config import PPOConfig
@@ -43,8 +47,13 @@ def parse_assignments(items: list[str], flag: str, grid: bool) -> dict[str, list
         key, sep, value = item.partition("=")
         if not sep or not value:
             raise ValueError(f"{flag} takes key=value, got {item!r}")
-        if key not in known or key in ("seed", "out_dir", "resume", "progress"):
-            raise ValueError(f"{flag}: {key!r} is not a settable PPOConfig field")
+        table, dot, entry = key.partition(".")
+        if dot and table in ("env", "train_env") and entry:
+            pass  # an entry of a table: env.dt=0.02 (checked with the config)
+        elif key not in known or key in ("seed", "out_dir", "resume", "progress", "env",
+                                         "train_env"):  # fmt: skip
+            raise ValueError(f"{flag}: {key!r} is not a settable PPOConfig field "
+                             "(a table's entry: env.KEY or train_env.KEY)")  # fmt: skip
         out[key] = [v.strip() for v in value.split(",")] if grid else value.strip()
     return out
 
@@ -92,7 +101,11 @@ def trial(config: dict) -> None:
     else:
         argv = ["--config", config["config"], "--seed", str(config["seed"]), "--progress", "false"]
         for key, value in config["settings"].items():
-            argv += [f"--{key.replace('_', '-')}", str(value)]
+            table, dot, entry = key.partition(".")
+            if dot:  # --env KEY=VALUE (a TOML value)
+                argv += [f"--{table.replace('_', '-')}", f"{entry}={value}"]
+            else:
+                argv += [f"--{key.replace('_', '-')}", str(value)]
         argv += ["--out-dir", str(out)]
     t0 = time.time()
     train_ppo.main(argv)

@@ -99,7 +99,7 @@ def run_start(
     ctl = ModelController(gains, env.params, env.options)
     if noise_nm > 0:
         rng = np.random.default_rng(noise_seed)
-        limit = env.torque_limit_nm
+        limit = env.settings.action.torque_limit_nm
         base = ctl
 
         def ctl(obs):

@@ -32,6 +32,7 @@ from pathlib import Path
 import cma
 import numpy as np
 
+from biped_constraint_env.observation import OBS_Q, OBS_QD
 from training.common import progress
 from training.model_controller import CONTROLLERS_DIR, ModelController, _read_gains
 
@@ -72,7 +73,7 @@ def env_from_rest():
 
 def _x(obs: np.ndarray) -> np.ndarray:
     """A state's coordinates in the distance: q1..q5 [rad], their rates times RATE_SCALE_S."""
-    return np.concatenate([obs[1:6], RATE_SCALE_S * obs[7:12]])
+    return np.concatenate([obs[OBS_Q][1:], RATE_SCALE_S * obs[OBS_QD][1:]])
 
 
 def gait_switch_states(gains: dict, seeds=range(5), seconds: float = 10.0) -> np.ndarray:

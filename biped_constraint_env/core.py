@@ -1,0 +1,261 @@
+"""The env core: N env rows stepped as one batch, under both the single and the vector env.
+
+:class:`EnvCore` holds everything after the settings (:mod:`.settings`) and around the compiled
+period (:mod:`.period`), written once: starts (drawn, or given by ``reset(options=...)``), the
+contact clock and the tracking task, perturbations, the period itself, termination reasons,
+the reward terms and ``info``. :class:`~.env.ConstrainedBipedEnv` is its N = 1 case (it adds
+Gymnasium's single-env API and rendering); :class:`~.vector_env.ConstrainedBipedVectorEnv`
+adds autoreset and time limits. Every row draws from its own generator (``rngs[i]``), so
+row i of a batch seeded s + i is the single env seeded s + i, bit for bit.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .actions import TORQUE_ACTIONS, action_config, validate_actions
+from .clock import ContactClock
+from .model import N_ACTUATED
+from .modes import EventCode
+from .observation import observation_space
+from .period import EnvBuffers
+from .perturbations import Perturbations
+from .rewards import (
+    REWARD_KINDS,
+    REWARD_TERMS,
+    TERMINATION_FALL,
+    TERMINATION_NON_FINITE,
+    reward_config,
+)
+from .settings import EnvSettings
+from .simulator import SimState, evaluate
+from .starts import check_start_state, draw_starts
+from .state import ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
+from .tracking import Tracking
+
+BASE_INFO_KEYS = ("mode", "stance_side", "steps_completed", "t", "hip_y", "switches", "events",
+                  "termination_reason")  # fmt: skip
+"""``info`` keys of every env; the reward's terms (``reward_<term>``) follow, then, when the
+settings ask for them, ``torque`` (PD actions) and ``push_impulse_ns``, ``push_dv_m_s``."""
+
+NOT_STEPPED = -1
+"""Status given to rows that skip a period (autoreset): the compiled period leaves them."""
+
+
+def event_infos(events) -> tuple[tuple, tuple]:
+    """``info["switches"]`` and ``info["events"]`` of one row's events.
+
+    ``switches``: (t, from, to) of each model switch; ``events``: (t, name, terminal) of each.
+    """
+    switches = tuple(
+        (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
+    )
+    return switches, tuple((e.t, e.code.name.lower(), e.terminal) for e in events)
+
+
+class EnvCore:
+    """N env rows with the settings ``settings`` (see the module docstring).
+
+    Args:
+        settings: :func:`~.settings.make_settings`' result. n: rows. num_threads: numba
+            threads of the compiled period (1: serial; see :class:`~.period.EnvBuffers`).
+    """
+
+    def __init__(self, settings: EnvSettings, n: int, num_threads: int = 1):
+        """Allocate the rows' buffers, clock, tracking task and perturbations."""
+        s, p, a = settings, settings.physics, settings.action
+        self.settings, self.n = s, n
+        self.observation_space = observation_space(
+            s.observation.phase_obs, s.observation.reference_obs
+        )
+        self.clock = ContactClock(n, p.dt) if s.needs_clock else None
+        self.tracking = Tracking(n, s, self.clock) if (s.needs_reference or a.pd) else None
+        env_weights = (s.reward.weights if s.reward.kind == "env"
+                       else tuple(t.weight for t in REWARD_KINDS["env"]))  # fmt: skip
+        self.buf = EnvBuffers(
+            n, p.params, p.options, p.dt,
+            reward_config(env_weights, a.torque_limit_nm, s.fall_hip_height_m),
+            action_config(a.bound, a.out_of_range), num_threads,
+            pcfg=self.tracking.pd_config() if a.pd else TORQUE_ACTIONS,
+        )  # fmt: skip
+        self.sim, self.hip = self.buf.sim, self.buf.hip
+        self._pd_follows = a.pd and self.tracking.pd_follows_reference
+        if a.pd and not self._pd_follows:  # constant bases about a fixed pose: set once
+            self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(n)
+        self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
+        self._track = s.reward.kind == "tracking"
+        self._pushes = s.perturbations.push_impulse_ns is not None
+        self._noisy = s.perturbations.obs_noise is not None
+        self.reward_keys = s.reward.info_keys
+        self.info_keys = BASE_INFO_KEYS + self.reward_keys + (
+            (("torque",) if a.pd else ()) + (("push_impulse_ns", "push_dv_m_s")
+                                             if self._pushes else ()))  # fmt: skip
+        self._terms = np.zeros((n, len(self.reward_keys)))
+        self._reasons = np.full(n, None, dtype=object)
+        self._any_reason = False
+        self._one = np.zeros(1, bool)  # the single env's terminated flag, reused
+
+    # ------------------------------------------------------------------ starts
+    def draw_starts(self, idx: np.ndarray, rngs) -> None:
+        """Drawn starts of rows ``idx`` (row ``idx[k]`` from ``rngs[k]``), clocks started.
+
+        With the reference, its reference-state starts and clock placement
+        (:meth:`~.tracking.Tracking.draw_starts`); else the env's own starts.
+        """
+        s, st = self.settings, self.settings.start
+        args = (s.physics.params, s.physics.options, self.sim, idx, rngs, st.start,
+                np.array(st.posture), st.reset_noise_scale)  # fmt: skip
+        if self.tracking is not None and self.tracking.ref is not None:
+            self.tracking.draw_starts(*args)
+        else:
+            draw_starts(*args)
+            if self.clock is not None:
+                self.clock.start(idx, self.sim.ist[idx, ST_MODE], self.sim.qd[idx])
+        self.perturb.start(idx, rngs)
+
+    def set_starts(self, idx: np.ndarray, state: SimState, rngs) -> None:
+        """Rows ``idx`` start at the given (checked) ``state`` (``reset(options=...)``)."""
+        p = self.settings.physics
+        check_start_state(p.params, state)
+        forces = evaluate(p.params, state, np.zeros(N_ACTUATED), p.options)[1]
+        for i in idx:
+            self.sim.set(int(i), state, forces)
+        if self.clock is not None:
+            if self.tracking is not None and self.tracking.ref is not None:
+                self.tracking.start_given(idx, self.sim)
+            else:
+                self.clock.start(idx, self.sim.ist[idx, ST_MODE], self.sim.qd[idx])
+        self.perturb.start(idx, rngs)
+
+    # ------------------------------------------------------------------ the period
+    def period(self, actions: np.ndarray, rngs, skip: np.ndarray | None = None):
+        """One control period of every row but ``skip``; (rewards (n,), terminated (n,)).
+
+        ``actions`` (n, 5) float: checked (NaN, inf, the bound) and clipped in the compiled
+        period, which refuses through :func:`~.actions.validate_actions`' ``ValueError``.
+        Afterwards :meth:`info` gives the period's ``info``.
+        """
+        buf, sim, a = self.buf, self.sim, self.settings.action
+        if self._pd_follows:  # the targets' bases at the clocks (of new starts too)
+            buf.tgt[:], buf.rate[:] = self.tracking.bases(self.n)
+        if self.perturb.active:  # pushes due now (stepped rows); the delayed actions
+            rows = range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
+            actions = self.perturb.before_period(actions.astype(np.float64), rngs, rows)
+        buf.act[:] = actions
+        steps0 = sim.ist[:, ST_STEPS].copy() if self._track else None
+        if skip is not None:
+            sim.status[skip] = NOT_STEPPED
+        if buf.period():
+            validate_actions(actions, a.bound, a.out_of_range, a.bound_name)
+            raise AssertionError(f"the compiled action check refused {actions}, Python not")
+        if skip is not None:
+            sim.status[skip] = 0
+            sim.n_events[skip] = 0
+        if self.clock is not None:
+            stepped = None
+            if skip is not None:
+                stepped = np.ones(self.n, bool)
+                stepped[skip] = False
+            self.clock.advance(sim.ist[:, ST_MODE], sim.ist[:, ST_STEPS], stepped)
+            if self.tracking is not None:
+                self.tracking.after_period(sim.ist[:, ST_STEPS])
+        if self.n == 1:  # the single env: scalar reads, a fifth of its step's Python time
+            terminated = self._one
+            terminated[0] = sim.status.item(0) > 0 or buf.fell.item(0) != 0
+        else:
+            terminated = (sim.status > 0) | (buf.fell != 0)
+        if self._track:
+            track = self.tracking.reward(sim.q, sim.qd, self.hip, sim.ist[:, ST_STEPS] - steps0,
+                                         ~terminated)  # fmt: skip
+            if skip is not None:
+                track[skip] = 0.0
+            self._terms, rewards = track[:, :-1], track[:, -1].copy()
+        else:
+            self._terms, rewards = buf.rew[:, : len(REWARD_TERMS)], buf.rew[:, -1].copy()
+        self._set_reasons(terminated)
+        return rewards, terminated
+
+    def _set_reasons(self, terminated: np.ndarray) -> None:
+        """The termination reason of every row (None where it goes on)."""
+        reasons, sim = self._reasons, self.sim
+        if self._any_reason:
+            reasons[:] = None
+        self._any_reason = bool(terminated[0] if self.n == 1 else terminated.any())
+        if not self._any_reason:
+            return
+        for i in np.flatnonzero(terminated):
+            if sim.status[i] == STATUS_TERMINATED:  # the terminal event names it
+                reasons[i] = next(e.code.name.lower() for e in sim.events_of(int(i)) if e.terminal)
+            elif sim.status[i] == STATUS_NONFINITE:
+                reasons[i] = TERMINATION_NON_FINITE
+            else:
+                reasons[i] = TERMINATION_FALL
+
+    def clear_period(self) -> None:
+        """Forget the last period (after a reset: no events, zero terms, no reasons)."""
+        self.sim.n_events[:] = 0
+        self._terms = np.zeros((self.n, len(self.reward_keys)))
+        self._reasons[:] = None
+        self._any_reason = False
+        self.perturb.push_ns[:] = 0.0
+        self.perturb.push_dv[:] = 0.0
+        if self.settings.action.pd:
+            self.buf.act[:] = 0.0
+
+    # ------------------------------------------------------------------ observation, info
+    def observation(self, rngs, rows=None) -> np.ndarray:
+        """(n, dim) observations, a fresh array.
+
+        The base entries, the phase and reference entries (when asked for), sensor noise on
+        ``rows`` (default all).
+        """
+        obs = self.buf.obs
+        if self.clock is not None:
+            parts = [obs]
+            if self.settings.observation.phase_obs:
+                parts.append(self.clock.features())
+            if self.settings.observation.reference_obs:
+                parts.append(self.tracking.observation())
+            obs = np.concatenate(parts, axis=1) if len(parts) > 1 else obs
+        if self._noisy:
+            obs = self.perturb.observe(obs, rngs, range(self.n) if rows is None else rows)
+        return obs.copy() if obs is self.buf.obs else obs
+
+    def info(self, row: int | None = None) -> dict[str, Any]:
+        """The last period's (or reset's) ``info``.
+
+        ``row`` None: one array per key (entry i: env i), as the vector env gives it; a row
+        index: that row's values as Python scalars and tuples, as the single env gives them.
+        """
+        sim, one = self.sim, row is not None
+        if one:
+            mode, side, steps, _ = sim.ist[row].tolist()
+            events = sim.events_of(row) if sim.n_events[row] else ()
+            switches, events = event_infos(events) if events else ((), ())
+            out = {"mode": mode, "stance_side": side, "steps_completed": steps,
+                   "t": sim.fst.item(row, 0), "hip_y": self.hip.item(row, 0),
+                   "switches": switches, "events": events,
+                   "termination_reason": self._reasons[row]}  # fmt: skip
+            out.update(zip(self.reward_keys, self._terms[row].tolist(), strict=True))
+        else:
+            switches = np.empty(self.n, dtype=object)
+            events = np.empty(self.n, dtype=object)
+            switches[:] = [()] * self.n
+            events[:] = [()] * self.n
+            for i in np.flatnonzero(sim.n_events[: self.n]):
+                switches[i], events[i] = event_infos(sim.events_of(int(i)))
+            mode, side, steps = sim.ist[:, :3].T.copy()  # ST_MODE, ST_SIDE, ST_STEPS: 0, 1, 2
+            out = {"mode": mode, "stance_side": side, "steps_completed": steps,
+                   "t": sim.fst[:, 0].copy(), "hip_y": self.hip[:, 0].copy(),
+                   "switches": switches, "events": events,
+                   "termination_reason": self._reasons.copy()}  # fmt: skip
+            out.update(zip(self.reward_keys, self._terms.T.copy(), strict=True))
+        if self.settings.action.pd:  # the period's time-mean PD torque
+            out["torque"] = self.buf.act[row].copy() if one else self.buf.act.copy()
+        if self._pushes:
+            p = self.perturb
+            out["push_impulse_ns"] = p.push_ns.item(row) if one else p.push_ns.copy()
+            out["push_dv_m_s"] = p.push_dv.item(row) if one else p.push_dv.copy()
+        return out

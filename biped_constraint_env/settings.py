@@ -1,0 +1,341 @@
+"""The env's settings: every keyword argument validated once, in groups, into one frozen object.
+
+Both envs build an :class:`EnvSettings` from ``gym.make`` / ``gym.make_vec`` keyword arguments
+(:func:`make_settings`) and keep it as ``settings``: the physics (robot, fidelity options,
+control period), the task (its name, the reference walk, the fall height), the start
+distribution, the action mapping, the reward (:mod:`.rewards`' registry), the observation and
+the perturbations (:mod:`.perturbations`). ``repr(settings)`` prints them and
+:meth:`EnvSettings.as_dict` gives them as data (training runs save it).
+
+The public kwargs stay flat where a Gymnasium user types them (``dt``, ``start``,
+``ctrl_cost_weight``, ``strict``...). Two groups are one kwarg each because their members only
+mean something together: ``action`` (``"torque"``, ``"pd"`` or ``{"kind": "pd", "around":
+..., "range": ..., ...}``: the PD mapping's six settings, which torque actions ignore) and
+``reward`` (a kind's name or ``{"kind", "weights", "kernels"}``), as ``perturbations`` is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .actions import (
+    PD_BOUND,
+    PD_KD,
+    PD_KP,
+    TORQUE_LIMIT_NM,
+    check_action_settings,
+    check_pd_dt,
+)
+from .model import N_ACTUATED, BipedParams, paper_biped
+from .options import SimOptions
+from .perturbations import PerturbationSettings, perturbation_settings
+from .reference import REFERENCES
+from .rewards import ENV_WEIGHT_KWARGS, RewardSettings, check_fall_height, reward_settings
+from .starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, check_start_settings
+from .tasks import TASKS, resolve_options, resolve_task
+from .validation import (
+    check_array,
+    check_bool,
+    check_choice,
+    check_mapping,
+    check_names,
+    check_real,
+)
+
+PD_RANGE_RAD = 1.0
+"""Default half-range of the PD targets around their base [rad] (``action["range"]``)."""
+PD_RANGE_MAX_RAD = 3.0
+PD_OFFSET_MAX_RAD = 1.0
+"""Bound of each ``action["offset"]`` entry [rad]."""
+PD_GAIN_SCALE_MAX = 100.0
+PD_FIXED_POSE_RAD = (-0.1, 0.1, -0.3, -0.4, 0.7)
+"""The default ``action["pose"]`` of ``around="fixed"``: q1..q5 of the Fig. 2 rest posture."""
+ACTION_KINDS = ("torque", "pd")
+PD_AROUND = ("fixed", "reference")
+PD_KEYS = ("kind", "around", "range", "pose", "offset", "gain_scale", "dt")
+"""Keys of the ``action`` dict (all but ``kind`` are the PD mapping's)."""
+
+
+@dataclass(frozen=True)
+class PhysicsSettings:
+    """The robot, the fidelity preset with its per-option overrides, and the control period."""
+
+    params: BipedParams
+    preset: str
+    options: SimOptions
+    dt: float
+
+
+@dataclass(frozen=True)
+class StartSettings:
+    """The start distribution: kind, rest posture, reset noise and reference-state fraction."""
+
+    start: str
+    posture: tuple[float, ...]
+    reset_noise_scale: float
+    rsi: float
+
+
+@dataclass(frozen=True)
+class ActionSettings:
+    """The action mapping: torques [N m], or PD targets in [-1, 1]^5 about a base.
+
+    PD targets ``base + offset + range * a`` hold over the control period; the law
+    ``Kp (target - q) + Kd (rate - q-dot)`` (``PD_KP`` x ``gain_scale``, ``PD_KD`` x its
+    square root), clipped to ``torque_limit_nm``, runs ``pd_substeps`` times in it.
+    """
+
+    kind: str
+    torque_limit_nm: float
+    out_of_range: str
+    around: str = "fixed"
+    range: float = PD_RANGE_RAD
+    pose: tuple[float, ...] = PD_FIXED_POSE_RAD
+    offset: tuple[float, ...] = (0.0,) * N_ACTUATED
+    gain_scale: float = 1.0
+    pd_substeps: int = 0
+
+    @property
+    def pd(self) -> bool:
+        """Whether the actions are PD targets."""
+        return self.kind == "pd"
+
+    @property
+    def bound(self) -> float:
+        """The action space's bound: 1 for PD targets, the torque limit for torques."""
+        return 1.0 if self.pd else self.torque_limit_nm
+
+    @property
+    def bound_name(self) -> str:
+        """The bound's name in error messages."""
+        return PD_BOUND if self.pd else "torque limit"
+
+    @property
+    def kp(self) -> np.ndarray:
+        """The proportional gains [N m / rad]."""
+        return PD_KP * self.gain_scale
+
+    @property
+    def kd(self) -> np.ndarray:
+        """The derivative gains [N m s / rad]."""
+        return PD_KD * np.sqrt(self.gain_scale)
+
+
+@dataclass(frozen=True)
+class ObservationSettings:
+    """Entries appended to the 24 base entries: the contact clock's phase, the reference."""
+
+    phase_obs: bool
+    reference_obs: bool
+
+
+@dataclass(frozen=True)
+class EnvSettings:
+    """Every setting of an env, validated (see the module docstring)."""
+
+    task: str
+    physics: PhysicsSettings
+    start: StartSettings
+    action: ActionSettings
+    reward: RewardSettings
+    observation: ObservationSettings
+    perturbations: PerturbationSettings
+    reference: str
+    fall_hip_height_m: float | None
+
+    @property
+    def dt(self) -> float:
+        """The control period [s]."""
+        return self.physics.dt
+
+    @property
+    def needs_reference(self) -> bool:
+        """Whether an option reads the reference walk (reward, starts, observation, PD base)."""
+        return (
+            self.reward.kind == "tracking"
+            or self.start.rsi > 0
+            or self.observation.reference_obs
+            or (self.action.pd and self.action.around == "reference")
+        )
+
+    @property
+    def needs_clock(self) -> bool:
+        """Whether the env keeps a contact clock (phase observed, or the reference read)."""
+        return self.observation.phase_obs or self.needs_reference
+
+    def as_dict(self) -> dict[str, Any]:
+        """The settings as plain data (numbers, strings, lists), in their groups."""
+
+        def plain(x):
+            if isinstance(x, tuple | list):
+                return [plain(v) for v in x]
+            if isinstance(x, np.ndarray):
+                return x.tolist()
+            return x
+
+        out: dict[str, Any] = {"task": self.task, "reference": self.reference,
+                               "fall_hip_height_m": self.fall_hip_height_m}  # fmt: skip
+        p = self.physics
+        out["physics"] = {
+            "params": "paper_biped" if p.params == paper_biped() else "custom",
+            "preset": p.preset,
+            "dt": p.dt,
+            "options": {k: plain(v) for k, v in dataclasses.asdict(p.options).items()},
+        }
+        for name in ("start", "action", "observation", "perturbations"):
+            group = getattr(self, name)
+            out[name] = {f.name: plain(getattr(group, f.name)) for f in dataclasses.fields(group)}
+        out["reward"] = self.reward.as_dict()
+        return out
+
+
+def _action_settings(spec: Any, task_spec: Any, limit, out_of_range, dt: float) -> ActionSettings:
+    """The ``action`` kwarg (a kind, or a dict of :data:`PD_KEYS`) on top of the task's."""
+
+    def as_dict(x):
+        return {"kind": x} if isinstance(x, str) else dict(check_mapping("action", x, PD_KEYS))
+
+    task = as_dict(task_spec)
+    given = {} if spec is None else as_dict(spec)
+    kind = check_choice("action kind", given.get("kind", task.get("kind", "torque")), ACTION_KINDS)
+    merged = {**(task if task.get("kind", "torque") == kind else {}), **given, "kind": kind}
+    limit, out_of_range = check_action_settings(limit, out_of_range)
+    if kind == "torque":
+        extra = sorted(set(given) - {"kind"})
+        if extra:
+            raise ValueError(f"action: {extra} are PD settings; torque actions take none")
+        return ActionSettings("torque", limit, out_of_range)
+    pose = merged.get("pose")
+    offset = merged.get("offset")
+    scale = check_real("action gain_scale", merged.get("gain_scale", 1.0), 0.0,
+                       PD_GAIN_SCALE_MAX, low_open=True)  # fmt: skip
+    return ActionSettings(
+        kind="pd",
+        torque_limit_nm=limit,
+        out_of_range=out_of_range,
+        around=check_choice("action around", merged.get("around", "fixed"), PD_AROUND),
+        range=check_real(
+            "action range",
+            merged.get("range", PD_RANGE_RAD),
+            0.0,
+            PD_RANGE_MAX_RAD,
+            low_open=True,
+            unit=" [rad]",
+        ),  # fmt: skip
+        pose=PD_FIXED_POSE_RAD
+        if pose is None
+        else tuple(check_array("action pose", pose, (N_ACTUATED,), np.pi, " [rad]").tolist()),
+        offset=(0.0,) * N_ACTUATED
+        if offset is None
+        else tuple(
+            check_array(
+                "action offset", offset, (N_ACTUATED,), PD_OFFSET_MAX_RAD, " [rad]"
+            ).tolist()
+        ),  # fmt: skip
+        gain_scale=scale,
+        pd_substeps=check_pd_dt(merged.get("dt"), dt),
+    )
+
+
+def _with_kind(spec: Any, task_kind: str) -> Any:
+    """The ``reward`` kwarg with the task's kind where it names none (None: the task's)."""
+    if spec is None:
+        return task_kind
+    if isinstance(spec, dict) and "kind" not in spec:
+        return {**spec, "kind": task_kind}
+    return spec
+
+
+def _reference(reference: Any, start: str) -> str:
+    """The reference walk's name or npz path (None: "rest" for rest/mixed starts)."""
+    if reference is None:
+        return "rest" if start in ("rest", "mixed") else "midstride"
+    if not isinstance(reference, str) or not (
+        reference in REFERENCES or (reference.endswith(".npz") and Path(reference).is_file())
+    ):
+        raise ValueError(f"reference must be one of {REFERENCES} or an npz path, got {reference!r}")
+    return reference
+
+
+def make_settings(
+    params: BipedParams | None = None,
+    task: str = "walk",
+    preset: str | None = None,
+    dt: float | None = None,
+    integrator: str | None = None,
+    substeps: int | None = None,
+    impact: str | None = None,
+    locate_events: bool | None = None,
+    jdot: str | None = None,
+    strict: bool | None = None,
+    heel_force_includes_foot_weight: bool | None = None,
+    step_tol: float | None = None,
+    stop_at_switch: bool | None = None,
+    torque_limit_nm: float = TORQUE_LIMIT_NM,
+    out_of_range: str = "clip",
+    forward_reward_weight: float | None = None,
+    alive_bonus: float | None = None,
+    switch_bonus: float | None = None,
+    step_bonus: float | None = None,
+    ctrl_cost_weight: float | None = None,
+    reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
+    fall_hip_height_m: float | None = None,
+    posture=NOMINAL_POSTURE_RAD,
+    start: str | None = None,
+    phase_obs: bool | None = None,
+    reward: str | dict | None = None,
+    reference: str | None = None,
+    rsi: float | None = None,
+    action: str | dict | None = None,
+    reference_obs: bool = False,
+    perturbations: dict[str, Any] | None = None,
+    **unknown: Any,
+) -> EnvSettings:
+    """Validate the env's keyword arguments (``ConstrainedBipedEnv``'s docstring) once.
+
+    ``task`` (:data:`~.tasks.TASKS`) sets the defaults of the arguments it names; each one
+    given explicitly overrides the task's (``action`` and ``reward`` dicts merge onto the
+    task's of the same kind).
+    """
+    check_names("argument(s) of ConstrainedBiped-v0", unknown, ENV_ARGUMENTS + ("render_mode",))
+    params = paper_biped() if params is None else params
+    t = resolve_task(task, preset=preset, dt=dt, stop_at_switch=stop_at_switch, start=start,
+                     reward=reward, rsi=rsi, action=action, phase_obs=phase_obs)  # fmt: skip
+    sim_overrides = dict(
+        integrator=integrator, substeps=substeps, impact=impact, locate_events=locate_events,
+        jdot=jdot, strict=strict, heel_force_includes_foot_weight=heel_force_includes_foot_weight,
+        step_tol=step_tol, stop_at_switch=t["stop_at_switch"],
+    )  # fmt: skip
+    options = resolve_options(t["preset"], t["dt"], sim_overrides)
+    dt = float(t["dt"])
+    start_kind, q0, noise = check_start_settings(params, t["start"], posture, reset_noise_scale)
+    task_action = TASKS[task].get("action", "torque")
+    weights = dict(zip(ENV_WEIGHT_KWARGS, (forward_reward_weight, alive_bonus, switch_bonus,
+                                           step_bonus, ctrl_cost_weight), strict=True))  # fmt: skip
+    return EnvSettings(
+        task=task,
+        physics=PhysicsSettings(params, t["preset"], options, dt),
+        start=StartSettings(
+            start_kind, tuple(q0.tolist()), noise, check_real("rsi", t["rsi"], 0.0, 1.0)
+        ),  # fmt: skip
+        action=_action_settings(action, task_action, torque_limit_nm, out_of_range, dt),
+        reward=reward_settings(_with_kind(reward, TASKS[task].get("reward", "env")), weights),
+        observation=ObservationSettings(
+            check_bool("phase_obs", t["phase_obs"]), check_bool("reference_obs", reference_obs)
+        ),
+        perturbations=perturbation_settings(perturbations),
+        reference=_reference(reference, start_kind),
+        fall_hip_height_m=check_fall_height(fall_hip_height_m),
+    )
+
+
+ENV_ARGUMENTS: tuple[str, ...] = tuple(
+    name for name in make_settings.__code__.co_varnames[: make_settings.__code__.co_argcount]
+)
+"""The keyword arguments of ``gym.make("ConstrainedBiped-v0", ...)`` besides ``render_mode``
+(a misspelt one raises a ValueError listing these)."""
