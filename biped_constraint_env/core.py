@@ -81,9 +81,9 @@ class EnvCore:
             pcfg=self.tracking.pd_config() if a.pd else TORQUE_ACTIONS,
         )  # fmt: skip
         self.sim, self.hip = self.buf.sim, self.buf.hip
-        self._pd_follows = a.pd and self.tracking.pd_follows_reference
+        self._pd_follows = a.pd and self.tracking.pd_bases_vary
         if a.pd and not self._pd_follows:  # constant bases about a fixed pose: set once
-            self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(n)
+            self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(np.ones(n, np.int64))
         self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
         self._track = s.reward.kind == "tracking"
         self._pushes = s.perturbations.push_impulse_ns is not None
@@ -138,8 +138,8 @@ class EnvCore:
         Afterwards :meth:`info` gives the period's ``info``.
         """
         buf, sim, a = self.buf, self.sim, self.settings.action
-        if self._pd_follows:  # the targets' bases at the clocks (of new starts too)
-            buf.tgt[:], buf.rate[:] = self.tracking.bases(self.n)
+        if self._pd_follows:  # the targets' bases at the clocks and models (new starts too)
+            buf.tgt[:], buf.rate[:] = self.tracking.bases(sim.ist[:, ST_MODE])
         if self.perturb.active:  # pushes due now (stepped rows); the delayed actions
             rows = range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
             actions = self.perturb.before_period(actions.astype(np.float64), rngs, rows)

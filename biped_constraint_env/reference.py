@@ -34,6 +34,10 @@ from .model import N_LINKS
 DATA_DIR = Path(__file__).resolve().parent / "data"
 """Shipped references: ``reference_midstride.npz`` and ``reference_rest.npz``."""
 REFERENCES = ("midstride", "rest")
+OWN_REFERENCE = "own"
+"""``reference="own"``: every start follows the shipped recording of its own kind (a start at
+rest the rest recording's first step, a mid-stride start the mid-stride one's); the default
+of ``start="mixed"``."""
 FIELDS = ("q", "qd", "hip", "mode", "j", "step", "first")
 HIP_Y, HIP_Z, HIP_VY, HIP_VZ = range(12, 16)
 """Columns of a phase table's row (q 0-5, q-dot 6-11, then the hip's y, z, vy, vz)."""

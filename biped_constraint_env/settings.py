@@ -34,7 +34,7 @@ from .actions import (
 from .model import N_ACTUATED, BipedParams, paper_biped
 from .options import SimOptions
 from .perturbations import PerturbationSettings, perturbation_settings
-from .reference import REFERENCES
+from .reference import OWN_REFERENCE, REFERENCES
 from .rewards import ENV_WEIGHT_KWARGS, RewardSettings, check_fall_height, reward_settings
 from .starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, check_start_settings
 from .tasks import TASKS, resolve_options, resolve_task
@@ -47,6 +47,8 @@ from .validation import (
     check_real,
 )
 
+N_MODELS = 4
+"""The paper's models (1-4): ``action["offset"]`` may give one row of offsets per model."""
 PD_RANGE_RAD = 1.0
 """Default half-range of the PD targets around their base [rad] (``action["range"]``)."""
 PD_RANGE_MAX_RAD = 3.0
@@ -96,7 +98,7 @@ class ActionSettings:
     around: str = "fixed"
     range: float = PD_RANGE_RAD
     pose: tuple[float, ...] = PD_FIXED_POSE_RAD
-    offset: tuple[float, ...] = (0.0,) * N_ACTUATED
+    offset: tuple[tuple[float, ...], ...] = ((0.0,) * N_ACTUATED,) * N_MODELS
     gain_scale: float = 1.0
     pd_substeps: int = 0
 
@@ -104,6 +106,11 @@ class ActionSettings:
     def pd(self) -> bool:
         """Whether the actions are PD targets."""
         return self.kind == "pd"
+
+    @property
+    def offset_by_model(self) -> bool:
+        """Whether the targets' offset differs between the models."""
+        return len(set(self.offset)) > 1
 
     @property
     def bound(self) -> float:
@@ -230,16 +237,24 @@ def _action_settings(spec: Any, task_spec: Any, limit, out_of_range, dt: float) 
         pose=PD_FIXED_POSE_RAD
         if pose is None
         else tuple(check_array("action pose", pose, (N_ACTUATED,), np.pi, " [rad]").tolist()),
-        offset=(0.0,) * N_ACTUATED
-        if offset is None
-        else tuple(
-            check_array(
-                "action offset", offset, (N_ACTUATED,), PD_OFFSET_MAX_RAD, " [rad]"
-            ).tolist()
-        ),  # fmt: skip
+        offset=_offsets(offset),
         gain_scale=scale,
         pd_substeps=check_pd_dt(merged.get("dt"), dt),
     )
+
+
+def _offsets(offset: Any) -> tuple[tuple[float, ...], ...]:
+    """``action["offset"]``: q1..q5 [rad] in every model, or one row per model (4 x 5)."""
+    if offset is None:
+        return ((0.0,) * N_ACTUATED,) * N_MODELS
+    try:
+        nested = np.ndim(offset) == 2
+    except ValueError:  # ragged: check_array names it
+        nested = False
+    shape = (N_MODELS, N_ACTUATED) if nested else (N_ACTUATED,)
+    rows = check_array("action offset", offset, shape, PD_OFFSET_MAX_RAD, " [rad]")
+    rows = np.broadcast_to(rows, (N_MODELS, N_ACTUATED))
+    return tuple(tuple(r.tolist()) for r in rows)
 
 
 def _with_kind(spec: Any, task_kind: str) -> Any:
@@ -252,13 +267,17 @@ def _with_kind(spec: Any, task_kind: str) -> Any:
 
 
 def _reference(reference: Any, start: str) -> str:
-    """The reference walk's name or npz path (None: "rest" for rest/mixed starts)."""
+    """The reference walk: a shipped name, "own" (each start its kind's) or an npz path.
+
+    None: the start's own ("rest", "midstride"; "own" for mixed starts).
+    """
     if reference is None:
-        return "rest" if start in ("rest", "mixed") else "midstride"
+        return {"rest": "rest", "mixed": OWN_REFERENCE}.get(start, "midstride")
+    known = (*REFERENCES, OWN_REFERENCE)
     if not isinstance(reference, str) or not (
-        reference in REFERENCES or (reference.endswith(".npz") and Path(reference).is_file())
+        reference in known or (reference.endswith(".npz") and Path(reference).is_file())
     ):
-        raise ValueError(f"reference must be one of {REFERENCES} or an npz path, got {reference!r}")
+        raise ValueError(f"reference must be one of {known} or an npz path, got {reference!r}")
     return reference
 
 

@@ -42,7 +42,14 @@ from .actions import pd_config
 from .clock import ContactClock
 from .hybrid import wrap_angles
 from .model import N_ACTUATED, N_LINKS
-from .reference import HIP_VY, HIP_Z, Reference, load_reference
+from .reference import (
+    HIP_VY,
+    HIP_Z,
+    OWN_REFERENCE,
+    REFERENCES,
+    Reference,
+    load_reference,
+)
 from .starts import draw_starts, start_slots
 
 if TYPE_CHECKING:
@@ -65,8 +72,10 @@ class Tracking:
         """Load the reference (when an option needs it) and index its phase tables."""
         self.settings = settings
         self.action = settings.action
+        self._pd_offset = np.array(settings.action.offset, dtype=np.float64)  # (4, 5), by model
         self.clock = clock
-        self.ref: Reference | None = None
+        self.refs: list[Reference] = []
+        self.which = np.zeros(n, np.int64)  # each env's reference (an index into refs)
         self.first = np.zeros(n, bool)  # in the reference's first step from its own start
         self._per = 1.0  # reference periods per control period (its clock is in its periods)
         r = settings.reward
@@ -75,65 +84,103 @@ class Tracking:
             self._k = np.array([r.kernel(t) for t in KERNEL_ERRORS])
             self._step_bonus = r.weight("step")
         if settings.needs_reference:
-            self.ref = load_reference(settings.reference)
-            self._per = clock.dt / self.ref.dt if clock.dt != self.ref.dt else 1.0
-            tables = self.ref.tables
-            self._rows = np.concatenate([tables[k] for k in sorted(tables)])
-            self._offset = np.zeros((2, 5), np.int64)
-            self._len = np.zeros((2, 5), np.int64)
-            at = 0
+            names = REFERENCES if settings.reference == OWN_REFERENCE else (settings.reference,)
+            self.refs = [load_reference(name) for name in names]
+            if len({ref.dt for ref in self.refs}) > 1:
+                raise ValueError("the references of reference='own' must share their dt")
+            self._per = clock.dt / self.refs[0].dt if clock.dt != self.refs[0].dt else 1.0
+            self._rest = next((i for i, ref in enumerate(self.refs) if ref.start == "rest"), -1)
+            self._index_tables()
+
+    @property
+    def ref(self) -> Reference | None:
+        """The (first) reference walk, None when no option reads one."""
+        return self.refs[0] if self.refs else None
+
+    def _index_tables(self) -> None:
+        """One array of every reference's phase tables; offsets and lengths by (ref, first, mode).
+
+        A phase the first step lacks takes the gait's.
+        """
+        parts = []
+        self._offset = np.zeros((len(self.refs), 2, 5), np.int64)
+        self._len = np.zeros((len(self.refs), 2, 5), np.int64)
+        at = 0
+        for r, ref in enumerate(self.refs):
+            tables = ref.tables
             for k in sorted(tables):
-                self._offset[k], self._len[k] = at, len(tables[k])
+                self._offset[(r, *k)], self._len[(r, *k)] = at, len(tables[k])
                 at += len(tables[k])
-            for m in range(1, 5):  # a phase the first step lacks: the gait's
-                if self._len[1, m] == 0:
-                    self._offset[1, m], self._len[1, m] = self._offset[0, m], self._len[0, m]
+                parts.append(tables[k])
+            for m in range(1, 5):
+                if self._len[r, 1, m] == 0:
+                    self._offset[r, 1, m], self._len[r, 1, m] = (self._offset[r, 0, m],
+                                                                 self._len[r, 0, m])  # fmt: skip
+        self._rows = np.concatenate(parts)
 
     # ------------------------------------------------------------------ the clock
     def rows(self) -> np.ndarray:
-        """(n, 16): the reference's (q, q-dot, hip) at every environment's clock."""
+        """(n, 16): each env's reference's (q, q-dot, hip) at its clock."""
         c = self.clock
         f = self.first.astype(np.int64)
-        m = c.mode
+        m, w = c.mode, self.which
         j = c.j if self._per == 1.0 else np.rint(c.j * self._per).astype(np.int64)
-        return self._rows[self._offset[f, m] + np.minimum(j, self._len[f, m] - 1)]
+        return self._rows[self._offset[w, f, m] + np.minimum(j, self._len[w, f, m] - 1)]
 
     def _env_periods(self, rows: np.ndarray) -> np.ndarray:
         """Reference rows (its periods since a model began) as the env's control periods."""
         return rows if self._per == 1.0 else np.rint(rows / self._per).astype(np.int64)
 
+    def _own(self, idx: np.ndarray) -> None:
+        """Each env of ``idx`` takes the reference of its start's kind (its clock started).
+
+        A start at rest the rest recording's, any other the other one (with one reference:
+        that one); it is in that reference's first step when the kinds match.
+        """
+        at_rest = self.clock.first[idx]
+        if len(self.refs) > 1:
+            self.which[idx] = np.where(at_rest, self._rest, 1 - self._rest)
+        self.first[idx] = at_rest == (self.refs[0].start == "rest") if len(self.refs) == 1 \
+            else True  # fmt: skip
+
     def draw_starts(self, params, options, sim, idx, rngs, start, posture, noise) -> None:
         """Start slots ``idx`` (slot ``idx[k]`` drawing from ``rngs[k]``) and their clocks.
 
-        With ``rsi`` > 0 each slot first draws whether it starts at a reference state; the
-        others draw the env's ``start`` (:func:`~.starts.draw_starts`). With ``rsi`` = 0 the
-        draws are exactly the env's own.
+        With ``rsi`` > 0 each slot first draws whether it starts at a reference state (with
+        two references, then which); the others draw the env's ``start``
+        (:func:`~.starts.draw_starts`). With ``rsi`` = 0 the draws are exactly the env's own.
         """
         idx = np.asarray(idx, np.int64)
         rsi = self.settings.start.rsi
         on_ref = np.zeros(idx.shape[0], bool)
         rows = np.zeros(idx.shape[0], np.int64)
+        refs = np.zeros(idx.shape[0], np.int64)
         if rsi > 0:
             for k in range(idx.shape[0]):
                 if rngs[k].random() < rsi:
                     on_ref[k] = True
-                    rows[k] = rngs[k].integers(len(self.ref.q))
+                    if len(self.refs) > 1:
+                        refs[k] = rngs[k].integers(len(self.refs))
+                    rows[k] = rngs[k].integers(len(self.refs[refs[k]].q))
         own = np.flatnonzero(~on_ref)
         if own.size:
             draw_starts(
                 params, options, sim, idx[own], [rngs[k] for k in own], start, posture, noise
             )
-        if on_ref.any():
-            ref, r, slots = self.ref, rows[on_ref], idx[on_ref]
-            sim.q[slots], sim.qd[slots] = ref.q[r], ref.qd[r]
-            start_slots(params, options, sim, slots, ref.mode[r].astype(np.int64))
+        for r in np.unique(refs[on_ref]):
+            k = on_ref & (refs == r)
+            ref, rr, slots = self.refs[r], rows[k], idx[k]
+            sim.q[slots], sim.qd[slots] = ref.q[rr], ref.qd[rr]
+            start_slots(params, options, sim, slots, ref.mode[rr].astype(np.int64))
         self.clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
-        # the reference's first step serves the starts of its own kind
-        self.first[idx] = self.clock.first[idx] == (self.ref.start == "rest")
-        if on_ref.any():
-            self.clock.first[slots] = ref.first[r].astype(bool)
-            self.clock.j[slots] = self._env_periods(ref.j[r])
-            self.first[slots] = ref.step[r] == 0
+        self._own(idx)  # the reference's first step serves the starts of its own kind
+        for r in np.unique(refs[on_ref]):
+            k = on_ref & (refs == r)
+            ref, rr, slots = self.refs[r], rows[k], idx[k]
+            self.which[slots] = r
+            self.clock.first[slots] = ref.first[rr].astype(bool)
+            self.clock.j[slots] = self._env_periods(ref.j[rr])
+            self.first[slots] = ref.step[rr] == 0
         self.place(idx[own], sim)
 
     def start_given(self, idx: np.ndarray, sim) -> None:
@@ -144,7 +191,8 @@ class Tracking:
         """
         idx = np.asarray(idx, np.int64)
         self.clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
-        self.first[idx] = self.clock.first[idx] & (self.ref.start == "rest")
+        self._own(idx)
+        self.first[idx] &= self.clock.first[idx]  # only a start at rest is on a first step
         self.place(idx, sim)
 
     def after_period(self, steps_after: np.ndarray) -> None:
@@ -156,32 +204,37 @@ class Tracking:
         c = self.clock
         idx = np.asarray(idx, np.int64)
         idx = idx[~self.first[idx]]
-        for m in np.unique(c.mode[idx]):
-            slots = idx[c.mode[idx] == m]
-            o, n = self._offset[0, m], self._len[0, m]
-            table = self._rows[o : o + n, :N_LINKS]
-            d = np.sum((sim.q[slots][:, None, :] - table[None, :, :]) ** 2, axis=2)
-            c.j[slots] = self._env_periods(np.argmin(d, axis=1))
+        for w in np.unique(self.which[idx]):
+            at = idx[self.which[idx] == w]
+            for m in np.unique(c.mode[at]):
+                slots = at[c.mode[at] == m]
+                o, n = self._offset[w, 0, m], self._len[w, 0, m]
+                table = self._rows[o : o + n, :N_LINKS]
+                d = np.sum((sim.q[slots][:, None, :] - table[None, :, :]) ** 2, axis=2)
+                c.j[slots] = self._env_periods(np.argmin(d, axis=1))
 
     # ------------------------------------------------------------------ actions
-    def bases(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 5) bases of the PD targets [rad] and their rates [rad/s] for ``n`` envs.
+    def bases(self, modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 5) bases of the PD targets [rad] and their rates [rad/s] of envs in ``modes``.
 
-        The fixed pose plus the offset (rates 0), or the reference's pose at the clock plus
-        the offset (its rates); an action a sets the targets base + ``pd_range`` x a, and the
-        compiled period applies the PD law to them (:mod:`.actions`).
+        The fixed pose plus the offset of the env's model (rates 0), or the reference's pose
+        at the clock plus that offset (its rates); an action a sets the targets base +
+        ``range`` x a, and the compiled period applies the PD law to them (:mod:`.actions`).
         """
-        offset = np.array(self.action.offset)
+        offset = self._pd_offset[np.asarray(modes) - 1]
         if self.action.around == "reference":
             rows = self.rows()
             return rows[:, 1:N_LINKS] + offset, rows[:, N_LINKS + 1 : 2 * N_LINKS]
-        base = np.array(self.action.pose) + offset
-        return np.broadcast_to(base, (n, N_ACTUATED)), np.zeros((n, N_ACTUATED))
+        return np.array(self.action.pose) + offset, np.zeros((len(offset), N_ACTUATED))
 
     @property
-    def pd_follows_reference(self) -> bool:
-        """Whether the PD targets' base moves with the reference (set before every period)."""
-        return self.action.pd and self.action.around == "reference"
+    def pd_bases_vary(self) -> bool:
+        """Whether the PD targets' bases change in an episode (set before every period).
+
+        They do about the reference, or with offsets that differ between the models.
+        """
+        a = self.action
+        return a.pd and (a.around == "reference" or a.offset_by_model)
 
     def pd_config(self) -> np.ndarray:
         """The compiled period's PD settings (:func:`~.actions.pd_config`)."""

@@ -328,7 +328,7 @@ def test_the_track_task_is_the_from_scratch_recipes_settings():
 
     s = gym.make("ConstrainedBiped-v0", task="track").unwrapped.settings
     assert s.reward.kind == "tracking" and s.start.rsi == 0.5 and s.action.kind == "pd"
-    assert s.action.around == "reference" and list(s.action.offset) == [0.2, 0, 0, 0, 0]
+    assert s.action.around == "reference" and s.action.offset == ((0.2, 0, 0, 0, 0),) * 4
     assert s.observation.phase_obs and s.dt == 0.005
     narrower = gym.make("ConstrainedBiped-v0", task="track", action={"range": 0.5}).unwrapped
     assert narrower.settings.action.range == 0.5  # merged onto the task's PD mapping

@@ -181,7 +181,7 @@ def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_sta
             break
     assert not env.core.tracking.first[0] or term
     # a mid-stride start with the rest reference: the gait's nearest state of model 2
-    env = ConstrainedBipedEnv(start="mixed", reference_obs=True, phase_obs=True)
+    env = ConstrainedBipedEnv(start="mixed", reference="rest", reference_obs=True, phase_obs=True)
     for seed in range(10):
         obs, info = env.reset(seed=seed)
         if info["mode"] == 2:
@@ -194,6 +194,30 @@ def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_sta
     # a start at rest with the rest reference: its first step
     env.reset(seed=0, options={"q": np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])})
     assert env.core.tracking.first[0] and env.core.clock.j[0] == 0
+
+
+def test_mixed_starts_follow_the_recording_of_their_own_kind():
+    """``start="mixed"`` (``reference="own"``): a start at rest follows the rest recording's
+    first step, a mid-stride start the mid-stride recording's."""
+    env = ConstrainedBipedEnv(start="mixed", reference_obs=True, phase_obs=True)
+    assert env.settings.reference == "own"
+    tr = env.core.tracking
+    kinds = {ref.start: i for i, ref in enumerate(tr.refs)}
+    seen = set()
+    for seed in range(20):
+        obs, info = env.reset(seed=seed)
+        kind = "rest" if info["mode"] == 1 else "midstride"
+        seen.add(kind)
+        ref = tr.refs[kinds[kind]]
+        assert tr.which[0] == kinds[kind] and tr.first[0] and env.core.clock.j[0] == 0
+        np.testing.assert_array_equal(obs[26:], ref.tables[(1, info["mode"])][0, :12])
+    assert seen == {"rest", "midstride"}
+    venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
+                        start="mixed", reference_obs=True, phase_obs=True, rsi=0.5)  # fmt: skip
+    envs = [gym.make("ConstrainedBiped-v0", start="mixed", reference_obs=True, phase_obs=True,
+                     rsi=0.5) for _ in range(4)]  # fmt: skip
+    vo, _ = venv.reset(seed=3)
+    np.testing.assert_array_equal(vo, [e.reset(seed=3 + i)[0] for i, e in enumerate(envs)])
 
 
 def test_default_env_is_unchanged_by_the_tracking_options_defaults():
@@ -244,3 +268,22 @@ def test_the_reference_clock_counts_its_own_periods_at_any_control_period():
         tf.clock.mode[:] = tc.clock.mode[:] = 2
         tf.first[:] = tc.first[:] = False
         np.testing.assert_array_equal(tf.rows(), tc.rows())
+
+
+def test_pd_offsets_by_model_apply_in_the_current_model():
+    """``action["offset"]`` with one row per model: the targets' offset is the row of the
+    model the env is in (here the stance ankle's only on the toe, models 2 and 3)."""
+    rows = [[0.0] * 5, [0.2, 0, 0, 0, 0], [0.2, 0, 0, 0, 0], [0.0] * 5]
+    a = np.array([0.1, -0.2, 0.3, 0.0, -0.1], np.float32)
+    for start, mode, off in (("rest", 1, 0.0), ("midstride", 2, 0.2)):
+        env = ConstrainedBipedEnv(start=start, action={"kind": "pd", "offset": rows})
+        assert env.settings.action.offset_by_model
+        _, info = env.reset(seed=2)
+        st = env.state
+        assert info["mode"] == mode
+        _, _, _, _, info = env.step(a)
+        target = np.array(PD_FIXED_POSE_RAD) + [off, 0, 0, 0, 0] + a.astype(np.float64)
+        want = PD_KP * (target - st.q[1:]) + PD_KD * (0.0 - st.qd[1:])
+        np.testing.assert_allclose(info["torque"], np.clip(want, -150, 150))
+    with pytest.raises(ValueError, match="offset"):
+        ConstrainedBipedEnv(action={"kind": "pd", "offset": rows[:3]})

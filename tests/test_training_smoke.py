@@ -140,6 +140,7 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
     )
     assert rc == 0
     (run,) = (tmp_path / "train_ppo").iterdir()
+    assert json.loads((run / "env_settings.json").read_text())["env"]["task"] == "walk"
     for name in (
         "config.toml",
         "command.txt",
@@ -195,7 +196,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     s = cfg.settings()
     assert s.action.pd and s.reward.kind == "tracking" and cfg.train_env["rsi"] > 0
     assert cfg.env_kwargs()["rsi"] == 0.0 and cfg.train_env_kwargs()["rsi"] == 0.5
-    assert s.action.offset[0] > 0 and read_config(run1).train_env == {"rsi": 0}
+    assert s.action.offset[1][0] > 0 and read_config(run1).train_env == {"rsi": 0}
     kinds = [{type(m).__name__ for m in load_policy(r)[0].modules()} for r in (run0, run1)]
     assert "Tanh" in kinds[0] and "ReLU" not in kinds[0] and "ReLU" in kinds[1]
     seen = []

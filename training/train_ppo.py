@@ -11,7 +11,8 @@ subprocess envs. Threads: torch and the batched env each use one thread by defau
 (``--torch-threads``, ``--env-threads``): on a 2-core machine, two of each made PPO several
 times slower. One seed drives everything.
 
-The run directory holds config.toml, command.txt, versions.json, eval.csv, one
+The run directory holds config.toml, env_settings.json (the validated env settings),
+command.txt, versions.json, eval.csv, one
 ``<start step>.monitor.csv`` per session, tb/ and figures/, and pickle-free snapshots
 (:mod:`training.policy_io`): ``imitation/`` (the warm start), ``best/`` (best periodic
 evaluation), ``final/`` and ``checkpoints/latest/`` (with the optimiser's state). Every
@@ -406,6 +407,19 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0
     return EvalAndCheckpoint()
 
 
+def write_settings(run: Path, cfg: PPOConfig) -> None:
+    """Write ``env_settings.json`` beside config.toml: the validated env settings.
+
+    Those of the env the policy runs in and of the training env (``EnvSettings.as_dict``);
+    nothing loads the file.
+    """
+    from biped_constraint_env.settings import make_settings
+
+    data = {"env": cfg.settings().as_dict(),
+            "train_env": make_settings(**cfg.train_env_kwargs()).as_dict()}  # fmt: skip
+    (run / "env_settings.json").write_text(json.dumps(data, indent=1) + "\n")
+
+
 def _resolve(argv: Sequence[str] | None) -> tuple[PPOConfig, Path]:
     """The config and run directory: a new run, or a resumed one with its own settings.
 
@@ -414,7 +428,9 @@ def _resolve(argv: Sequence[str] | None) -> tuple[PPOConfig, Path]:
     cfg = parse_config(PPOConfig, argv, __doc__.splitlines()[0])
     if not cfg.resume:
         try:
-            return cfg, make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
+            run = make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
+            write_settings(run, cfg)
+            return cfg, run
         except OSError as e:
             raise SystemExit(
                 f"error: --out-dir {cfg.out_dir}: cannot create the run ({e})"
