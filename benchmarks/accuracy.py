@@ -590,7 +590,7 @@ def main(argv=None) -> int:
     args.out = args.out or Path("runs/accuracy_quick" if args.quick else "runs/accuracy")
     args.out.mkdir(parents=True, exist_ok=True)
     params = paper_biped()
-    from training.common import progress
+    from training.plumbing.common import progress
 
     results = {}
     for name in progress(["a", "b", "c", "stability", "mujoco"], 5, "accuracy study"):

@@ -39,7 +39,7 @@ ACTION_FRACTION = 0.05  # random actions at 5% of the bound: episodes last tens 
 
 def walking_actions(n: int, seed: int = 0) -> np.ndarray:
     """The model controller's actions over n periods of the default walking task from seed."""
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     env = gym.make("ConstrainedBiped-v0", max_episode_steps=n + 1)
     ctl = controller_from("model:teacher_robust")
@@ -56,7 +56,7 @@ def walking_actions(n: int, seed: int = 0) -> np.ndarray:
 def walking_actions_batched(n: int, num_envs: int, seed: int = 0) -> np.ndarray:
     """The model controller's actions (n, num_envs, 5) over n periods of the batched default
     walking task reset with ``seed`` (sub-environment i seeded seed + i)."""
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     venv = gym.make_vec(
         "ConstrainedBiped-v0",

@@ -42,7 +42,7 @@ DEFAULT_CONFIG = "training/configs/ppo_from_scratch.toml"
 
 def _config(path: str, overrides: Sequence[str] = ()):
     """The PPOConfig of a train_ppo config file with train_ppo flags on top."""
-    from training.common import parse_config
+    from training.plumbing.common import parse_config
     from training.ppo_config import PPOConfig
 
     return parse_config(PPOConfig, ["--config", path, *overrides], "bench")

@@ -61,6 +61,11 @@ from .stepper import (
     nb_make_scratch,
 )
 
+EV_MODE_SWITCH = int(EventCode.MODE_SWITCH)
+EV_BEHIND = int(EventCode.STEP_BEHIND_STANCE_TOE)
+EV_ZENO = int(EventCode.ZENO)
+"""Event codes the period records itself (plain ints: numba freezes them as constants)."""
+
 _SU, _RS = packed_mode_table()[3:5]
 
 
@@ -112,6 +117,9 @@ def _reset_map(chs, scs, side, reset, q, qd, root_y, iopt):
 
 
 @njit_noalloc
+# One function of ~170 lines on purpose: the period's event loop (integrate, locate, impact,
+# switch, renumber) shares a dozen scalars per iteration; numba compiles it as one loop with
+# no calls that return tuples, which keeps the period allocation-free (test_jit).
 def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev, forces, W, S):
     """Advance one simulator by one control period dt [s], in place.
 
@@ -234,14 +242,14 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
                             best = g1[kk]
                             k = kk
         # ---- handle event k at time t, state (q, qd)
-        if k == 0:
+        if k == EV_MODE_SWITCH:
             succ = SUCCESSOR[mode]
             behind, side, root_y = _reset_map(chs, scs, side, RESET[mode], q, qd, root_y, iopt)
             if behind:
-                nev = _record(ev, nev, t, 9, mode, mode, 1)
+                nev = _record(ev, nev, t, EV_BEHIND, mode, mode, 1)
                 status = 1
                 break
-            nev = _record(ev, nev, t, 0, mode, succ, 0)
+            nev = _record(ev, nev, t, EV_MODE_SWITCH, mode, succ, 0)
             if mode == 4:
                 steps += 1
             mode = succ
@@ -251,7 +259,7 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
             if adaptive:
                 h_try = max(h_nom * EVENT_STEP_FRACTION, H_MIN_S)
             if switches > iopt[IO_MAX_SWITCHES]:
-                nev = _record(ev, nev, t, 10, mode, mode, 1)
+                nev = _record(ev, nev, t, EV_ZENO, mode, mode, 1)
                 status = 1
                 break
             check = True

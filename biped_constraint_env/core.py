@@ -32,7 +32,7 @@ from .rewards import (
 from .settings import EnvSettings
 from .simulator import SimState, evaluate
 from .starts import check_start_state, draw_starts
-from .state import ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
+from .state import FS_T, ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
 from .tracking import Tracking
 
 BASE_INFO_KEYS = ("mode", "stance_side", "steps_completed", "t", "hip_y", "switches", "events",
@@ -235,7 +235,7 @@ class EnvCore:
             events = sim.events_of(row) if sim.n_events[row] else ()
             switches, events = event_infos(events) if events else ((), ())
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
-                   "t": sim.fst.item(row, 0), "hip_y": self.hip.item(row, 0),
+                   "t": sim.fst.item(row, FS_T), "hip_y": self.hip.item(row, 0),
                    "switches": switches, "events": events,
                    "termination_reason": self._reasons[row]}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms[row].tolist(), strict=True))
@@ -248,7 +248,7 @@ class EnvCore:
                 switches[i], events[i] = event_infos(sim.events_of(int(i)))
             mode, side, steps = sim.ist[:, :3].T.copy()  # ST_MODE, ST_SIDE, ST_STEPS: 0, 1, 2
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
-                   "t": sim.fst[:, 0].copy(), "hip_y": self.hip[:, 0].copy(),
+                   "t": sim.fst[:, FS_T].copy(), "hip_y": self.hip[:, 0].copy(),
                    "switches": switches, "events": events,
                    "termination_reason": self._reasons.copy()}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms.T.copy(), strict=True))

@@ -1,6 +1,6 @@
 """Reference motions on a clock synchronised to the contact model.
 
-A reference is a recorded walk (``python -m training.record_reference``: the model-based
+A reference is a recorded walk (``python -m training.controller.record_reference``: the model-based
 teacher, under the default physics and strict checks), kept as plain arrays in an npz file.
 It is looked up on the *contact clock* ``(first, mode, j)``:
 

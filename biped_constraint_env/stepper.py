@@ -124,6 +124,8 @@ def _limex_step(ch, sc, mode, q, qd, tau6, h, fd, eps, W, S, mr):
 
 
 @njit_noalloc
+# ~80 lines on purpose: the integrators' stages share the workspaces W and S in one compiled
+# function (no allocation per step, test_jit); one branch per integrator, read top to bottom.
 def nb_integrate_w(ch, sc, mode, q, qd, tau6, h, iopt, fopt, a, b, W, S, use_k1=False):
     """One integration step of length h [s] inside ``mode``; result in S[S_Q1], S[S_QD1].
 

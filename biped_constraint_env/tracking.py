@@ -51,6 +51,7 @@ from .reference import (
     load_reference,
 )
 from .starts import draw_starts, start_slots
+from .state import ST_MODE
 
 if TYPE_CHECKING:
     from .settings import EnvSettings
@@ -172,7 +173,7 @@ class Tracking:
             ref, rr, slots = self.refs[r], rows[k], idx[k]
             sim.q[slots], sim.qd[slots] = ref.q[rr], ref.qd[rr]
             start_slots(params, options, sim, slots, ref.mode[rr].astype(np.int64))
-        self.clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
+        self.clock.start(idx, sim.ist[idx, ST_MODE], sim.qd[idx])
         self._own(idx)  # the reference's first step serves the starts of its own kind
         for r in np.unique(refs[on_ref]):
             k = on_ref & (refs == r)
@@ -190,7 +191,7 @@ class Tracking:
         gait (:meth:`place`).
         """
         idx = np.asarray(idx, np.int64)
-        self.clock.start(idx, sim.ist[idx, 0], sim.qd[idx])
+        self.clock.start(idx, sim.ist[idx, ST_MODE], sim.qd[idx])
         self._own(idx)
         self.first[idx] &= self.clock.first[idx]  # only a start at rest is on a first step
         self.place(idx, sim)

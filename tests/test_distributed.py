@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from biped_constraint_env.simulator import PAPER_OPTIONS
-from training import table2_study
-from training.distributed import TasksFailed, init_ray, run_tasks, shutdown
-from training.open_loop import TABLES
+from training.paper import table2_study
+from training.paper.open_loop import TABLES
+from training.plumbing.distributed import TasksFailed, init_ray, run_tasks, shutdown
 
 ray = pytest.importorskip("ray")
 
@@ -48,7 +48,7 @@ def test_table2_study_on_ray_equals_serial(tmp_path, local_ray):
 
 
 def test_open_loop_population_on_ray_equals_serial(local_ray):
-    from training.optimize_open_loop import OptimiseConfig, score_population
+    from training.paper.optimize_open_loop import OptimiseConfig, score_population
 
     X = np.random.default_rng(0).normal(0, 30, (10, 25))
     X[:, 20:] = X[:, 20:] / 100
@@ -152,7 +152,7 @@ def test_readme_sweep_command_runs_every_trial(tmp_path):
 
 @pytest.mark.slow
 def test_rllib_example_trains_one_iteration(capsys):
-    from training import rllib_example
+    from training.plumbing import rllib_example
 
     assert rllib_example.main(["--iterations", "1", "--env-runners", "2", "--batch", "250"]) == 0
     assert "iteration 0: 250" in capsys.readouterr().out

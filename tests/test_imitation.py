@@ -7,7 +7,7 @@ import torch
 
 import biped_constraint_env  # noqa: F401
 from training import imitation
-from training.model_controller import ModelController
+from training.controller.model_controller import ModelController
 from training.sb3_vec import ActionMap, make_sb3_vec_env
 
 GEAR = np.array([60.0, 150.0, 150.0, 80.0, 65.0])

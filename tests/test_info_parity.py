@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from training.model_controller import controller_from
+from training.controller.model_controller import controller_from
 
 OPTIONS = [
     {},

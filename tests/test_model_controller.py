@@ -1,14 +1,17 @@
-"""The model-based controller (training/model_controller.py): state from obs, legal contact
-forces at the sample, and its documented mid-stride result through the event-driven env."""
+"""The model-based controller (training/controller/model_controller.py): state from obs,
+legal contact forces at the sample, and its documented mid-stride result through the
+event-driven env."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
 
 from biped_constraint_env.env import ConstrainedBipedEnv
 from biped_constraint_env.simulator import evaluate
-from training.model_controller import (
+from training.controller.model_controller import (
     DEFAULT_GAINS,
     ModelController,
     midstride_state,
@@ -70,13 +73,26 @@ def test_documented_walk():
 
 
 def test_tune_script_smoke(tmp_path):
-    from training.tune_model_controller import main
+    from training.controller.tune import main
 
     main(
         ["--iterations", "1", "--population", "4", "--cap", "1", "--starts", "2"]
         + ["--out", str(tmp_path)]
     )
     assert (tmp_path / "best_gains.json").exists()
+    assert len((tmp_path / "history.csv").read_text().splitlines()) == 1 + 4
+
+
+def test_tune_start_phase_smoke(tmp_path, monkeypatch):
+    """``--phase start``: the same CMA-ES search with the start-from-rest cost."""
+    from training.controller import tune
+
+    real = tune.gait_switch_states
+    monkeypatch.setattr(tune, "gait_switch_states", lambda g: real(g, range(1), 3.0))
+    tune.main(["--phase", "start", "--iterations", "1", "--population", "4", "--seeds", "1",
+               "--out", str(tmp_path)])  # fmt: skip
+    best = json.loads((tmp_path / "best_start.json").read_text())
+    assert set(best) == set(tune.START_BOUNDS)
     assert len((tmp_path / "history.csv").read_text().splitlines()) == 1 + 4
 
 

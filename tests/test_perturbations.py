@@ -12,7 +12,7 @@ from biped_constraint_env.dynamics import nb_mass_matrix
 from biped_constraint_env.kinematics import nb_point_jacobian
 from biped_constraint_env.model import SC_HEEL5, SC_TOE5, paper_biped
 from biped_constraint_env.perturbations import HIP_LINK, hip_impulse
-from training.model_controller import controller_from
+from training.controller.model_controller import controller_from
 
 ALL = {
     "push_impulse_ns": (-0.6, 0.3),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from training.model_controller import ModelController
+from training.controller.model_controller import ModelController
 from training.rollouts import run_episodes, run_episodes_batched
 
 KEYS = ("seed", "steps_completed", "end")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from training.model_controller import TEACHER, at_rest, controller_from, state_from_obs
+from training.controller.model_controller import TEACHER, at_rest, controller_from, state_from_obs
 
 POLICY = Path(__file__).resolve().parents[1] / "policies" / "ppo_walker"
 

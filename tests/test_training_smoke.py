@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from training import open_loop
+from training.paper import open_loop
 
 
 def test_open_loop_writes_run_directory(tmp_path):
@@ -70,7 +70,7 @@ def test_open_loop_noisy_starts_use_the_config_start():
 
 
 def test_optimize_open_loop_midstride_smoke(tmp_path):
-    from training import optimize_open_loop
+    from training.paper import optimize_open_loop
 
     args = ["--out-dir", str(tmp_path), "--start", "midstride", "--iterations", "2"]
     args += ["--population", "16", "--restarts", "1", "--seconds", "0.5", "--progress", "false"]
@@ -220,7 +220,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
 
 def test_train_ppo_help_explains_every_setting(capsys):
     from training import train_ppo
-    from training.common import field_help
+    from training.plumbing.common import field_help
     from training.ppo_config import PPOConfig
 
     helps = field_help(PPOConfig)
@@ -232,7 +232,7 @@ def test_train_ppo_help_explains_every_setting(capsys):
 
 
 def test_table2_study_smoke(tmp_path):
-    from training import table2_study
+    from training.paper import table2_study
 
     rc = table2_study.main(
         [
@@ -308,7 +308,7 @@ def test_sweep_without_ray_says_what_to_install(monkeypatch):
 
 
 def test_teacher_gains_are_found_from_any_directory(monkeypatch, tmp_path):
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     monkeypatch.chdir(tmp_path)  # e.g. a Ray Tune trial's own directory
     controller_from("model:teacher_robust")
@@ -363,7 +363,7 @@ def test_sweep_assignments_reach_the_env_tables():
 def test_env_table_flags_go_on_top_of_the_config_table():
     """``--env KEY=VALUE``: TOML values over the config file's [env] entries, checked by the
     env's own settings check; the saved config holds the merged table."""
-    from training.common import parse_config, to_toml
+    from training.plumbing.common import parse_config, to_toml
     from training.ppo_config import PPOConfig
 
     cfg = parse_config(PPOConfig, ["--config", "training/configs/ppo_from_scratch.toml",

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from training import evaluate, train_ppo
-from training.safe_files import RunLock, write_manifest
+from training.plumbing.safe_files import RunLock, write_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRATCH = ROOT / "policies" / "ppo_from_scratch"
@@ -376,10 +376,11 @@ def test_an_interrupted_evaluation_leaves_the_old_output(tmp_path, sig):
 
 # ---------------------------------------------------------------- every command's --help
 COMMANDS = [
-    "training.train_ppo", "training.evaluate", "training.compare_runs", "training.open_loop",
-    "training.optimize_open_loop", "training.paper_numerics", "training.table2_study",
-    "training.record_reference", "training.tune_model_controller", "training.tune_start",
-    "training.model_controller", "training.policy_io", "training.sweep",
+    "training.train_ppo", "training.evaluate", "training.compare_runs",
+    "training.paper.open_loop", "training.paper.optimize_open_loop",
+    "training.paper.paper_numerics", "training.paper.table2_study",
+    "training.controller.record_reference", "training.controller.tune",
+    "training.controller.model_controller", "training.policy_io", "training.sweep",
     "benchmarks.accuracy", "benchmarks.bench_core", "benchmarks.bench_env",
     "benchmarks.bench_ppo", "benchmarks.failure_modes",
 ]  # fmt: skip
@@ -412,7 +413,7 @@ def test_every_command_answers_help_without_side_effects(tmp_path):
 
 def test_the_zip_reader_refuses_a_stored_size_beyond_the_header(tmp_path):
     """An npz member whose stored bytes exceed what its header's shape needs."""
-    from training.safe_files import UntrustedFileError, read_npz
+    from training.plumbing.safe_files import UntrustedFileError, read_npz
 
     path = tmp_path / "x.npz"
     np.savez(path, a=np.zeros(4))

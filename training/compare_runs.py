@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.common import CliParser, int_in, refusals, write_text_atomic
+from training.plumbing.common import CliParser, int_in, refusals, write_text_atomic
 from training.policy_io import available, find_snapshot, load_policy, load_state, policy_actor
 from training.rollouts import run_episodes, summarize
 
@@ -66,7 +66,7 @@ def evaluate_run(run: Path, which: str, seeds: list[int]) -> dict:
 
 def scaffold_row(config: Path, seeds: list[int]) -> dict:
     """The run-time env of ``config`` with a zero network output, on ``seeds``."""
-    from training.common import parse_config
+    from training.plumbing.common import parse_config
     from training.ppo_config import PPOConfig
 
     cfg = parse_config(PPOConfig, ["--config", str(config)], "")
@@ -143,7 +143,7 @@ def _compare(a: argparse.Namespace) -> int:
             f"{r['steps_std']:.1f}, min {r['steps_min']} | {r['ends']} |"
         )
     if a.curves is not None and a.runs:
-        from training.plots import selection_curves
+        from training.plumbing.plots import selection_curves
 
         a.curves.parent.mkdir(parents=True, exist_ok=True)
         labels = []

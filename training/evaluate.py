@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from training.common import CliParser, float_in, int_in
+from training.plumbing.common import CliParser, float_in, int_in
+from training.plumbing.safe_files import UntrustedFileError, atomic_output
 from training.policy_io import (
     SNAPSHOTS,
     available,
@@ -53,7 +54,6 @@ from training.rollouts import (
     summarize,
     table_row,
 )
-from training.safe_files import UntrustedFileError, atomic_output
 from training.stats import MIN_STEPS
 
 GIF_MAX_FRAMES = 500
@@ -63,7 +63,7 @@ MIN_STEPS_FROM_REST = MIN_STEPS
 
 def open_loop_baselines() -> list[dict]:
     """The Table 2 open loop (paper preset, and the accurate default), run now."""
-    from training.open_loop import OpenLoopConfig, run
+    from training.paper.open_loop import OpenLoopConfig, run
 
     rows = []
     for label, kw in (
@@ -96,7 +96,7 @@ def open_loop_baselines() -> list[dict]:
 
 def figures(actor, cfg, seed_best: int, seed_worst: int, eps_by_seed: dict, out_dir: Path):
     """GIF (real time, 50 fps, at most GIF_MAX_FRAMES frames) and strips of two episodes."""
-    from training import plots
+    from training.plumbing import plots
 
     for name, seed in (("best", seed_best), ("worst", seed_worst)):
         frames, images = [], []
@@ -129,7 +129,7 @@ STRIP_S = 2.0
 
 def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
     """Figure: the first ``STRIP_S`` from rest (stick figures, centre of mass and pressure)."""
-    from training import plots
+    from training.plumbing import plots
     from training.rollouts import com_and_cop
 
     frames = []
@@ -159,7 +159,7 @@ def controller_batch(spec: str, n: int):
 
     Each keeps its own start phase.
     """
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     ctrls = [controller_from(spec) for _ in range(n)]
 
@@ -181,7 +181,7 @@ def batched_row(label: str, act, env_kw: dict, seeds, env_id: str, rest: bool = 
 
 def _rest_rows(batch, cfg, seeds) -> tuple[list[dict], str]:
     """The network and the teacher from rest (1x and 3x reset noise), with initiation figures."""
-    from training.model_controller import TEACHER
+    from training.controller.model_controller import TEACHER
 
     spec = cfg.teacher if "+" in cfg.teacher else TEACHER  # a teacher with its start phase
     kw = {**cfg.env_kwargs(), "start": "rest"}
@@ -198,7 +198,7 @@ def _rest_rows(batch, cfg, seeds) -> tuple[list[dict], str]:
 
 def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> list[dict]:
     """The ``--compare`` rows: stresses of the policy, imitation alone, teacher, Table 2."""
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     kw = cfg.env_kwargs()
     noisy = {**kw, "reset_noise_scale": 3 * cfg.settings().start.reset_noise_scale}
@@ -325,7 +325,7 @@ def _policy_loop(args) -> dict:
 
 def _controller_loop(args) -> dict:
     """What runs for ``--controller``: the model controller on the default walking task."""
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
     from training.ppo_config import PPOConfig
 
     controller_from(args.controller)  # refuses an unknown name here
@@ -358,7 +358,7 @@ def _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir)
 
 def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     """Run the rows and write the outputs into ``out_dir`` (a fresh temporary directory)."""
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     cfg = loop["cfg"]
     in_the_loop = cfg.in_the_loop() if loop["policy"] else f"the {loop['label']}"

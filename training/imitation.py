@@ -1,10 +1,10 @@
 """Demonstrations from the model controller (a teacher) and behaviour cloning into a PPO policy.
 
-The teacher (:class:`training.model_controller.ModelController`) labels observations with its
-torques; the student is Stable-Baselines3's ``MlpPolicy`` (the network PPO goes on to train), its
-action in [-1, 1]^5 scaled per joint by ``gear`` [N m] (as Walker2d's gear), its observations
-normalised inside the network by fixed statistics of the demonstrations
-(:class:`FixedNormalizer`).
+The teacher (:class:`training.controller.model_controller.ModelController`) labels
+observations with its torques; the student is Stable-Baselines3's ``MlpPolicy`` (the
+network PPO goes on to train), its action in [-1, 1]^5 scaled per joint by ``gear`` [N m]
+(as Walker2d's gear), its observations normalised inside the network by fixed statistics
+of the demonstrations (:class:`FixedNormalizer`).
 
 * :func:`collect` rolls episodes out in the env, the executed torque being the teacher's (DART:
   plus Gaussian noise, so that the data cover the states the student's errors lead to) or the

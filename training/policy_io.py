@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from training.safe_files import (
+from training.plumbing.safe_files import (
     UntrustedFileError,
     inside,
     read_json_object,
@@ -385,7 +385,7 @@ def read_config(run: Path):
     (:meth:`PPOConfig.check_untrusted`: the registered env id, the package's own controller
     and reference names, no path).
     """
-    from training.common import config_from_mapping
+    from training.plumbing.common import config_from_mapping
     from training.ppo_config import PPOConfig
 
     run = Path(run)
@@ -473,7 +473,7 @@ def import_sb3_zip(
 
     from stable_baselines3 import PPO
 
-    from training.common import to_toml
+    from training.plumbing.common import to_toml
     from training.ppo_config import ACTIVATIONS, PPOConfig, activation_fn
 
     print(SB3_PICKLE_WARNING.format(path=zip_path), file=sys.stderr, flush=True)
@@ -530,7 +530,7 @@ def main(argv: list[str] | None = None) -> int:
         help="the env it was trained in (gym.make's kwargs as TOML values)",
     )
     a = ap.parse_args(argv)
-    from training.common import parse_assignment
+    from training.plumbing.common import parse_assignment
 
     env = dict(parse_assignment(item, "--env") for item in a.env)
     import_sb3_zip(a.model_zip, a.vecnormalize, a.out, env=env)

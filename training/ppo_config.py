@@ -62,7 +62,7 @@ class PPOConfig:
 
     # imitation warm start (teacher "" = none): DART demonstrations of the model controller,
     # DAgger rounds, behaviour cloning into the policy network PPO then trains
-    teacher: str = ""  # "model", "model:NAME" (training/controllers/NAME.json) or "model:PATH"
+    teacher: str = ""  # "model", "model:NAME" (training/controller/gains/NAME.json) or "model:PATH"
     bc_episodes0: int = 40  # DART episodes of the teacher (round 0)
     bc_noise_nm: float = 0.4  # std of the torque noise injected into every collected episode
     bc_rounds: int = 10  # DAgger rounds (the student acts, the teacher labels)
@@ -106,13 +106,14 @@ class PPOConfig:
                 raise ValueError(f"--{_flag(name)} takes {' or '.join(map(str, sizes))} values")
         if self.batch_size > self.n_steps * self.n_envs:
             raise ValueError("--batch-size must be at most --n-steps x --n-envs")  # fmt: skip
-        from biped_constraint_env.reference import REFERENCES
+        from biped_constraint_env.reference import OWN_REFERENCE, REFERENCES
         from biped_constraint_env.settings import make_settings
 
         for table in ("env", "train_env"):  # shipped references only: a config names no file
             ref = getattr(self, table).get("reference")
-            if ref is not None and ref not in REFERENCES:
-                raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES}, "
+            if ref is not None and ref not in (*REFERENCES, OWN_REFERENCE):
+                raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES} "
+                                 f"or {OWN_REFERENCE!r}, "
                                  f"got {ref!r}")  # fmt: skip
         for name, kwargs in (("env", self.env_kwargs()), ("train_env", self.train_env_kwargs())):
             try:
@@ -127,7 +128,7 @@ class PPOConfig:
         ``"module:Id"`` id); controllers, teachers and references must be the package's own
         names, not paths; a saved config resumes nothing else.
         """
-        from training.model_controller import shipped_controllers
+        from training.controller.model_controller import shipped_controllers
 
         self.validate()
         for name in ("teacher", "base_controller"):

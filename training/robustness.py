@@ -79,7 +79,7 @@ def compact(rows: list[dict]) -> list[dict]:
 
 def figure(rows: list[dict], path: Path, title: str) -> None:
     """Success against push size (forward, backward) and a panel of the other conditions."""
-    from training.plots import _mpl
+    from training.plumbing.plots import _mpl
 
     plt = _mpl()
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.2), gridspec_kw={"width_ratios": [1, 1.4]})

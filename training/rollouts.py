@@ -43,7 +43,7 @@ def run_episodes(
     import gymnasium as gym
 
     import biped_constraint_env  # noqa: F401
-    from training.common import progress
+    from training.plumbing.common import progress
 
     env = gym.make(env_id, **env_kwargs, render_mode="rgb_array" if record else None)
     params = env.unwrapped.params
@@ -157,29 +157,30 @@ def run_episodes_batched(
             final[i] = {k: info[k][i] for k in ("steps_completed", "hip_y", "t")}
             final[i]["end"] = info["termination_reason"][i] or "time_limit"
     params = venv.unwrapped.params
-    weight = params.total_mass_kg * params.gravity_mps2
     venv.close()
-    out = []
-    for i, seed in enumerate(seeds):
-        f = final[i]
-        dist = float(f["hip_y"] - y0[i])
-        out.append(
-            {
-                "seed": int(seed),
-                "steps_completed": int(f["steps_completed"]),
-                "distance_m": dist,
-                "speed_m_s": dist / max(float(f["t"]), 1e-9),
-                "return": float(ret[i]),
-                "t_s": float(f["t"]),
-                "end": f["end"],
-                "cost_of_transport": float(work[i] / (weight * dist)) if dist > 0 else math.nan,
-                "step_t_s": step_t[i],
-                "step_hip_y_m": step_hip[i],
-                "first_step_m": math.nan,  # (the single env's run_episodes measures it)
-                "push_dv_m_s": pushes[i],  # the hip's velocity change of each push
-            }
-        )
-    return out
+    weight = params.total_mass_kg * params.gravity_mps2
+    return [_batched_episode(int(seed), final[i], float(y0[i]), float(ret[i]), work[i] / weight,
+                             step_t[i], step_hip[i], pushes[i])
+            for i, seed in enumerate(seeds)]  # fmt: skip
+
+
+def _batched_episode(seed, f, y0, ret, work_per_weight, step_t, step_hip, pushes) -> dict:
+    """One episode's record of :func:`run_episodes_batched` (``f``: its last info)."""
+    dist = float(f["hip_y"] - y0)
+    return {
+        "seed": seed,
+        "steps_completed": int(f["steps_completed"]),
+        "distance_m": dist,
+        "speed_m_s": dist / max(float(f["t"]), 1e-9),
+        "return": ret,
+        "t_s": float(f["t"]),
+        "end": f["end"],
+        "cost_of_transport": float(work_per_weight / dist) if dist > 0 else math.nan,
+        "step_t_s": step_t,
+        "step_hip_y_m": step_hip,
+        "first_step_m": math.nan,  # (the single env's run_episodes measures it)
+        "push_dv_m_s": pushes,  # the hip's velocity change of each push
+    }
 
 
 STEADY_FROM_STEP = 10

@@ -23,8 +23,8 @@ class ActionMap:
     Without a base: ``tau = gear * clip(a, -1, 1)``, ``gear`` [N m] per joint (a scalar or
     (5,), at most the torque limit), as Walker2d's gear. With a base controller (a callable
     ``base(obs (n, 24), residual=(n, 5))`` returning torques, e.g.
-    :class:`training.model_controller.ModelController`): ``tau = base(obs, residual=gear * a)``,
-    a learned residual on it.
+    :class:`training.controller.model_controller.ModelController`):
+    ``tau = base(obs, residual=gear * a)``, a learned residual on it.
     """
 
     def __init__(self, gear=TORQUE_LIMIT_NM, base=None, limit: float = TORQUE_LIMIT_NM):
@@ -48,12 +48,12 @@ def action_map_from(base_controller: str, gear, limit: float = TORQUE_LIMIT_NM) 
     """The :class:`ActionMap` of a training config.
 
     ``base_controller``: "" (none: the policy's torques alone), or ``"model"`` /
-    ``"model:GAINS.json"`` for :class:`training.model_controller.ModelController` (default
-    gains, or those overridden by the JSON file) with ``gear`` bounding the residual.
+    ``"model:GAINS.json"`` for :class:`training.controller.model_controller.ModelController`
+    (default gains, or those overridden by the JSON file) with ``gear`` bounding the residual.
     """
     if not base_controller:
         return ActionMap(gear, None, limit)
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     return ActionMap(gear, controller_from(base_controller, limit), limit)
 

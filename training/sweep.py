@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from training.common import CliParser, int_in
-from training.distributed import connect, shutdown
+from training.plumbing.common import CliParser, int_in
+from training.plumbing.distributed import connect, shutdown
 
 METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
 

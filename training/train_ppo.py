@@ -35,7 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from training.common import given_flags, make_run_dir, parse_config, progress, to_toml
+from training.plumbing.common import given_flags, make_run_dir, parse_config, progress, to_toml
+from training.plumbing.safe_files import RunLock, read_npz
 from training.policy_io import (
     UntrustedFileError,
     available,
@@ -58,7 +59,6 @@ from training.ppo_config import (
     bc_weights,
 )
 from training.rollouts import run_episodes, run_episodes_batched
-from training.safe_files import RunLock, read_npz
 
 RESUME_OVERRIDES = ("total_timesteps", "progress")
 """The settings a resume may change (given as flags); every other one is the run's own."""
@@ -84,117 +84,55 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
     import gymnasium as gym
 
     from training import imitation
-    from training.model_controller import controller_from
+    from training.controller.model_controller import controller_from
 
     env = gym.make(cfg.env_id, **cfg.env_kwargs()).unwrapped
     teacher = controller_from(cfg.teacher, TORQUE_LIMIT_NM)
     gear = cfg.action_map().gear
-    weights = bc_weights(cfg)
     rng = np.random.default_rng(cfg.seed)
     ckpt = run / IMITATION_CKPT
-    show = cfg.progress
 
-    def bar(desc):
-        return lambda seeds: progress(seeds, len(seeds), desc, enabled=show)
+    def collect(seed, episodes, periods, desc, student=None):
+        bar = lambda seeds: progress(seeds, len(seeds), desc, enabled=cfg.progress)  # noqa: E731
+        return imitation.collect(
+            env,
+            teacher,
+            gear,
+            list(range(seed, seed + episodes)),
+            periods,
+            cfg.bc_noise_nm,
+            student=student,
+            rng=rng,
+            progress=bar,
+        ).data
 
     t0 = time.time()
     prev = ckpt.with_name(ckpt.name + ".prev")
     where = ckpt if is_complete(ckpt) else prev if is_complete(prev) else None
     if where is not None:
-        st = load_state(where)
-        z = read_npz(where / "data.npz", _data_spec(cfg))
-        data = imitation.Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
-        n = cfg.obs_dim()  # the statistics come with the weights
-        model = make_model(np.zeros(n), np.ones(n))
-        load_weights(model.policy, where)
-        rng.bit_generator.state = st["rng"]
-        k0, seed, rows, t0 = st["round"], st["seed"], st["rows"], t0 - st["wall_s"]
-        print(f"imitation: resuming at round {k0} ({len(data)} samples)", flush=True)
+        model, data, (k0, seed, rows, wall) = _resume_imitation(cfg, where, make_model, rng)
+        t0 -= wall
     else:
         seed = DEMO_SEED_OFFSET + 100_000 * cfg.seed
         print(f"imitation: {cfg.bc_episodes0} noisy teacher episodes (DART)", flush=True)
-        demo = imitation.collect(
-            env,
-            teacher,
-            gear,
-            list(range(seed, seed + cfg.bc_episodes0)),
-            cfg.bc_periods0,
-            cfg.bc_noise_nm,
-            rng=rng,
-            progress=bar("DART episodes"),
-        )
+        data = collect(seed, cfg.bc_episodes0, cfg.bc_periods0, "DART episodes")
         seed += cfg.bc_episodes0
-        data = demo.data
         model = make_model(*imitation.obs_statistics(data.obs))
         k0, rows = 0, []
     t_session = time.time()
     for k in range(k0, cfg.bc_rounds + 1):
-        full = k in (0, cfg.bc_rounds)
-        steps = cfg.bc_grad_steps if full else cfg.bc_grad_steps // 3
-        epochs = max(1, round(steps * 512 / len(data)))
         done = k - k0  # rounds of this session: their mean time gives the ETA
         per_round = (time.time() - t_session) / max(done, 1)
         eta = f", about {per_round * (cfg.bc_rounds + 1 - k):.0f} s to go" if done else ""
-        print(
-            f"imitation round {k} of {cfg.bc_rounds}: fitting {len(data)} samples, {epochs} "
-            f"epochs{eta}",
-            flush=True,
-        )
-        mse = imitation.fit(
-            model.policy,
-            data,
-            epochs,
-            lr=cfg.bc_lr,
-            seed=cfg.seed + k,
-            weights=weights,
-            log=lambda s: print(s, flush=True),
-        )
-        student = imitation.student_fn(model.policy)
-        check = [
-            e["steps_completed"]
-            for e in run_episodes(
-                lambda o, student=student: np.clip(student(o), -1, 1) * gear,
-                cfg.env_kwargs(),
-                range(IMITATION_CHECK_SEED_OFFSET, IMITATION_CHECK_SEED_OFFSET + 5),
-                cfg.env_id,
-            )
-        ]
-        rows.append(
-            {
-                "round": k,
-                "samples": len(data),
-                "mse": mse,
-                "student_steps": json.dumps(check),
-                "wall_s": round(time.time() - t0),
-            }
-        )
-        print(
-            f"imitation round {k} of {cfg.bc_rounds}: mse {mse:.2e}, student steps {check} "
-            f"({time.time() - t0:.0f} s)",
-            flush=True,
-        )
+        rows.append(_imitation_round(cfg, model, data, k, gear, eta, t0))
         if k == cfg.bc_rounds:
             break
-        more = imitation.collect(
-            env,
-            teacher,
-            gear,
-            list(range(seed, seed + cfg.bc_episodes)),
-            cfg.bc_periods,
-            cfg.bc_noise_nm,
-            student=student,
-            rng=rng,
-            progress=bar(f"DAgger round {k + 1}"),
-        )
+        student = imitation.student_fn(model.policy)
+        data = data + collect(seed, cfg.bc_episodes, cfg.bc_periods, f"DAgger round {k + 1}",
+                              student)  # fmt: skip
         seed += cfg.bc_episodes
-        data = data + more.data
-        state = {
-            "round": k + 1,
-            "seed": seed,
-            "rows": rows,
-            "rng": rng.bit_generator.state,
-            "wall_s": time.time() - t0,
-        }
+        state = {"round": k + 1, "seed": seed, "rows": rows, "rng": rng.bit_generator.state,
+                 "wall_s": time.time() - t0}  # fmt: skip
         save_snapshot(
             ckpt, model.policy, state, arrays={"data.npz": {"obs": data.obs, "act": data.act}}
         )
@@ -205,6 +143,43 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
         w.writeheader()
         w.writerows(rows)
     return model, data
+
+
+def _resume_imitation(cfg: PPOConfig, where: Path, make_model, rng):
+    """(model, data, (round, seed, rows, wall_s)) of an imitation checkpoint; the RNG restored."""
+    from training import imitation
+
+    st = load_state(where)
+    z = read_npz(where / "data.npz", _data_spec(cfg))
+    data = imitation.Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
+    n = cfg.obs_dim()  # the statistics come with the weights
+    model = make_model(np.zeros(n), np.ones(n))
+    load_weights(model.policy, where)
+    rng.bit_generator.state = st["rng"]
+    print(f"imitation: resuming at round {st['round']} ({len(data)} samples)", flush=True)
+    return model, data, (st["round"], st["seed"], st["rows"], st["wall_s"])
+
+
+def _imitation_round(cfg: PPOConfig, model, data, k: int, gear, eta: str, t0: float) -> dict:
+    """Round ``k``'s fit of the data into the policy, and 5 student episodes: its csv row."""
+    from training import imitation
+
+    full = k in (0, cfg.bc_rounds)
+    steps = cfg.bc_grad_steps if full else cfg.bc_grad_steps // 3
+    epochs = max(1, round(steps * 512 / len(data)))
+    print(f"imitation round {k} of {cfg.bc_rounds}: fitting {len(data)} samples, {epochs} "
+          f"epochs{eta}", flush=True)  # fmt: skip
+    mse = imitation.fit(model.policy, data, epochs, lr=cfg.bc_lr, seed=cfg.seed + k,
+                        weights=bc_weights(cfg), log=lambda s: print(s, flush=True))  # fmt: skip
+    student = imitation.student_fn(model.policy)
+    seeds = range(IMITATION_CHECK_SEED_OFFSET, IMITATION_CHECK_SEED_OFFSET + 5)
+    eps = run_episodes(lambda o: np.clip(student(o), -1, 1) * gear, cfg.env_kwargs(), seeds,
+                       cfg.env_id)  # fmt: skip
+    check = [e["steps_completed"] for e in eps]
+    print(f"imitation round {k} of {cfg.bc_rounds}: mse {mse:.2e}, student steps {check} "
+          f"({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
+    return {"round": k, "samples": len(data), "mse": mse, "student_steps": json.dumps(check),
+            "wall_s": round(time.time() - t0)}  # fmt: skip
 
 
 def _critic_warmup(cfg: PPOConfig, anchor=None):
@@ -293,6 +268,51 @@ def update_threads(rollout_threads: int, update_threads: int):
     return UpdateThreads()
 
 
+def _vecnorm_normalizer(vecnorm):
+    """The :class:`~training.policy_io.ObsNormalizer` of a VecNormalize's current statistics."""
+    from training.policy_io import ObsNormalizer
+
+    rms = vecnorm.__dict__.get("obs_rms")
+    return ObsNormalizer({
+        "norm_obs": vecnorm.norm_obs, "obs_mean": getattr(rms, "mean", None),
+        "obs_var": getattr(rms, "var", None), "epsilon": vecnorm.epsilon,
+        "clip_obs": vecnorm.clip_obs,
+    })  # fmt: skip
+
+
+def _eval_row(eps: list[dict], n: int, wall_s: float) -> dict:
+    """One ``eval.csv`` row of a periodic evaluation's episodes."""
+    steps = np.array([e["steps_completed"] for e in eps])
+    return {
+        "env_steps": n,
+        "wall_s": round(wall_s, 1),
+        "steps_mean": steps.mean(),
+        "steps_min": steps.min(),
+        "distance_mean_m": float(np.mean([e["distance_m"] for e in eps])),
+        "return_mean": float(np.mean([e["return"] for e in eps])),
+        "reasons": json.dumps(dict(Counter(e["end"] for e in eps))),
+    }
+
+
+def selection_score(row: dict, select_by: str) -> float:
+    """The score of which ``best/`` keeps the highest.
+
+    The mean steps (distance breaks ties), or with ``select_by="min"`` the fewest steps of the
+    episodes first.
+    """
+    score = float(row["steps_mean"] + 1e-3 * row["distance_mean_m"])
+    return float(row["steps_min"] + 1e-3 * score) if select_by == "min" else score
+
+
+def _append_csv(path: Path, row: dict) -> None:
+    new = not path.exists()
+    with open(path, "a", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(row))
+        if new:
+            w.writeheader()
+        w.writerow(row)
+
+
 def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0.0):
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -348,58 +368,28 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0
             )
 
         def _evaluate(self, n):
-            from training.policy_io import ObsNormalizer
-
-            norm = ObsNormalizer(
-                {
-                    "norm_obs": vecnorm.norm_obs,
-                    "obs_mean": getattr(vecnorm.__dict__.get("obs_rms"), "mean", None),
-                    "obs_var": getattr(vecnorm.__dict__.get("obs_rms"), "var", None),
-                    "epsilon": vecnorm.epsilon,
-                    "clip_obs": vecnorm.clip_obs,
-                }
-            )
             eps = run_episodes_batched(
-                policy_batch_actor(self.model.policy, norm, cfg),
+                policy_batch_actor(self.model.policy, _vecnorm_normalizer(vecnorm), cfg),
                 cfg.env_kwargs(),
                 range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + cfg.eval_episodes),
                 cfg.env_id,
             )
-            steps = np.array([e["steps_completed"] for e in eps])
-            dist = np.array([e["distance_m"] for e in eps])
-            ret = np.array([e["return"] for e in eps])
-            reasons = Counter(e["end"] for e in eps)
-            row = {
-                "env_steps": n,
-                "wall_s": round(time.time() - self.t0, 1),
-                "steps_mean": steps.mean(),
-                "steps_min": steps.min(),
-                "distance_mean_m": dist.mean(),
-                "return_mean": ret.mean(),
-                "reasons": json.dumps(dict(reasons)),
-            }
-            new = not self.csv.exists()
-            with open(self.csv, "a", newline="") as fh:
-                w = csv.DictWriter(fh, fieldnames=list(row))
-                if new:
-                    w.writeheader()
-                w.writerow(row)
+            row = _eval_row(eps, n, time.time() - self.t0)
+            _append_csv(self.csv, row)
             for k in ("steps_mean", "distance_mean_m", "return_mean"):
                 self.logger.record(f"eval/{k}", row[k])
-            score = float(steps.mean() + 1e-3 * dist.mean())
-            if cfg.select_by == "min":
-                score = float(steps.min() + 1e-3 * score)
+            score = selection_score(row, cfg.select_by)
             if score > self.best:
                 self.best = score
                 save_snapshot(
                     run / "best",
                     self.model.policy,
-                    {"num_timesteps": n, "score": score, "steps_mean": float(steps.mean())},
+                    {"num_timesteps": n, "score": score, "steps_mean": float(row["steps_mean"])},
                     vecnorm,
                 )
             print(
-                f"[eval] {n} env steps: steps {steps.mean():.2f} (min {steps.min()}), "
-                f"distance {dist.mean():.2f} m, ends {dict(reasons)} "
+                f"[eval] {n} env steps: steps {row['steps_mean']:.2f} (min {row['steps_min']}), "
+                f"distance {row['distance_mean_m']:.2f} m, ends {row['reasons']} "
                 f"({time.time() - self.t0:.0f} s)",
                 flush=True,
             )
@@ -638,7 +628,7 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
     save_snapshot(run / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
     with open(run / "training_time.txt", "a") as fh:
         fh.write(f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
-    from training.plots import learning_curve
+    from training.plumbing.plots import learning_curve
 
     learning_curve(run, run / "figures" / "learning_curve.png")
     print(

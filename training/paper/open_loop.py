@@ -1,6 +1,7 @@
 """Open-loop baseline: constant torques per model (the paper's Table 2) through the env.
 
-    python -m training.open_loop [--config training/configs/open_loop_table2_paper.toml] [--flags]
+    python -m training.paper.open_loop [--config training/configs/open_loop_table2_paper.toml]
+        [--flags]
 
 The torque row of the *current* model is applied each control period. With the paper preset
 (explicit Euler, switching at the 20 ms sample) the model changes only at a sample, so the
@@ -28,7 +29,7 @@ import numpy as np
 
 import biped_constraint_env  # noqa: F401  (registers the env)
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, sample_initial_q
-from training.common import make_run_dir, parse_config, progress
+from training.plumbing.common import make_run_dir, parse_config, progress
 
 TABLES: dict[str, np.ndarray] = {
     "table2": np.array(
@@ -163,7 +164,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = run(cfg)
     rd = make_run_dir(cfg.out_dir, "open_loop", cfg.env_id, cfg.seed, cfg, argv)
     print(f"run directory: {rd}")
-    from training import plots
+    from training.plumbing import plots
 
     name = "config torques" if cfg.torques else cfg.table
     title = f"{name}, preset {cfg.preset}, signs {tuple(cfg.signs)}"

@@ -1,6 +1,6 @@
 """How far does the paper's Table 2 walk? A search over the paper's open choices.
 
-    python -m training.table2_study [--postures 64] [--seconds 10] [--out-dir runs]
+    python -m training.paper.table2_study [--postures 64] [--seconds 10] [--out-dir runs]
                                     [--ray | --ray-address HOST:PORT]
 
 Readings searched (all combinations): the 32 per-joint sign mappings of the paper's torques
@@ -12,7 +12,7 @@ error-controlled RK4_LIMEX, located events, exact J-dot, foot weight included); 
 versus lenient end checks.
 Table 2 is applied as a per-model torque table, so the torque changes exactly at each model
 switch. Every option set's readings run in one batch of the compiled simulator, a Ray task
-each with ``--ray`` (training/distributed.py; the same result as the serial run). The best
+each with ``--ray`` (training/plumbing/distributed.py; the same result as the serial run). The best
 strict and best
 lenient readings get a local posture refinement (random search) and a sensitivity test
 (completed steps under uniform posture noise of +-0.01 rad, 100 samples).
@@ -48,9 +48,10 @@ from biped_constraint_env.simulator import (
     keypoints,
 )
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
-from training.common import make_run_dir, parse_config
-from training.distributed import TasksFailed, connect, run_tasks, shutdown
-from training.open_loop import TABLES
+from biped_constraint_env.state import FS_ROOT, ST_STEPS
+from training.paper.open_loop import TABLES
+from training.plumbing.common import make_run_dir, parse_config
+from training.plumbing.distributed import TasksFailed, connect, run_tasks, shutdown
 
 SIGNS = np.array(list(itertools.product((1, -1), repeat=5)), dtype=float)
 
@@ -104,7 +105,7 @@ def run_batch(tables: np.ndarray, postures: np.ndarray, options, seconds: float,
             end[i] = int(codes[0]) if codes else int(EventCode.NON_FINITE)
         if (sim.status != 0).all():
             break
-    return sim.ist[:, 2].copy(), sim.fst[:, 1].copy(), end
+    return sim.ist[:, ST_STEPS].copy(), sim.fst[:, FS_ROOT].copy(), end
 
 
 def option_sets():
@@ -160,7 +161,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     qs = np.tile(postures, (len(SIGNS), 1))
     sign_idx = np.repeat(np.arange(len(SIGNS)), len(postures))
     post_idx = np.tile(np.arange(len(postures)), len(SIGNS))
-    rows, summary = [], {"readings_per_option_set": len(qs), "option_sets": {}}
+    summary = {"readings_per_option_set": len(qs), "option_sets": {}}
     sets = list(option_sets())
     jobs = [
         (tables, qs, opts, cfg.seconds, dataclasses.replace(paper_biped(), friction_ratio=K))
@@ -181,6 +182,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         summary["failed_option_sets"] = {sets[i][0]: err for i, _, err in e.failures}
     finally:
         shutdown()
+    rows = _tally(summary, sets, batches, qs, sign_idx, post_idx)
+    for mode in ("strict", "lenient"):  # refinement and sensitivity of the best readings
+        best = _refine_best(summary, sets, mode, cfg, rng)
+        if best is not None:
+            summary[f"best_{mode}"] = best
+    with gzip.open(rd / "readings.csv.gz", "wt", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["option_set", "sign_index", "posture_index", "steps", "root_y_m", "end_code"])
+        w.writerows(rows)
+    (rd / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    np.save(rd / "postures.npy", postures)
+    _figures(summary, rd)
+    print(f"{'option set':<34} {'>=1':>5} {'>=2':>5} {'>=4':>5} {'max':>4}  most common end")
+    for name, v in summary["option_sets"].items():
+        top = next(iter(v["ends"].items()))
+        print(
+            f"{name:<34} {v['readings_with_ge1_steps']:>5} {v['readings_with_ge2_steps']:>5} "
+            f"{v['readings_with_ge4_steps']:>5} {v['max_steps']:>4}  {top[0]} ({top[1]})"
+        )
+    for mode in ("strict", "lenient"):
+        print(f"best {mode}:", json.dumps(summary.get(f"best_{mode}")))
+    print(f"run directory: {rd}")
+    return 1 if "failed_option_sets" in summary else 0
+
+
+def _tally(summary: dict, sets, batches, qs, sign_idx, post_idx) -> list[tuple]:
+    """Each option set's counts, best reading and ends into ``summary``; the readings' rows."""
+    rows = []
     for (name, _, _), batch in zip(sets, batches, strict=True):
         if batch is None:
             continue
@@ -201,69 +230,36 @@ def main(argv: Sequence[str] | None = None) -> int:
             },
             "ends": dict(ends.most_common()),
         }
-        for i in range(len(qs)):
-            rows.append(
-                (
-                    name,
-                    int(sign_idx[i]),
-                    int(post_idx[i]),
-                    int(steps[i]),
-                    float(root_y[i]),
-                    int(end[i]),
-                )
-            )
-    # refinement and sensitivity of the best strict and the best lenient reading
-    for mode in ("strict", "lenient"):
-        cands = [(v["max_steps"], n) for n, v in summary["option_sets"].items() if f"/{mode}/" in n]
-        if not cands:
-            continue
-        steps_best, name = max(cands)
-        entry = summary["option_sets"][name]
-        opts = next(o for n, o, _ in sets if n == name)
-        K = next(k for n, _, k in sets if n == name)
-        q_ref, s_ref = refine(
-            np.array(entry["best"]["signs"], float),
-            np.array(entry["best"]["posture"]),
-            opts,
-            K,
-            cfg.seconds,
-            cfg.refine_iterations,
-            rng,
-        )
-        noisy = q_ref + np.concatenate(
-            [np.zeros((100, 1)), rng.uniform(-0.01, 0.01, (100, 5))], axis=1
-        )
-        table = TABLES["table2"] * np.array(entry["best"]["signs"], float)
-        params = dataclasses.replace(paper_biped(), friction_ratio=K)
-        s_noisy, _, _ = run_batch(np.repeat(table[None], 100, 0), noisy, opts, cfg.seconds, params)
-        summary[f"best_{mode}"] = {
-            "option_set": name,
-            "signs": entry["best"]["signs"],
-            "steps_before_refinement": steps_best,
-            "refined_posture": q_ref.round(6).tolist(),
-            "refined_steps": s_ref,
-            "sensitivity_steps_under_0.01rad_noise": dict(
-                sorted(Counter(s_noisy.tolist()).items())
-            ),
-        }
-    with gzip.open(rd / "readings.csv.gz", "wt", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["option_set", "sign_index", "posture_index", "steps", "root_y_m", "end_code"])
-        w.writerows(rows)
-    (rd / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    np.save(rd / "postures.npy", postures)
-    _figures(summary, rd)
-    print(f"{'option set':<34} {'>=1':>5} {'>=2':>5} {'>=4':>5} {'max':>4}  most common end")
-    for name, v in summary["option_sets"].items():
-        top = next(iter(v["ends"].items()))
-        print(
-            f"{name:<34} {v['readings_with_ge1_steps']:>5} {v['readings_with_ge2_steps']:>5} "
-            f"{v['readings_with_ge4_steps']:>5} {v['max_steps']:>4}  {top[0]} ({top[1]})"
-        )
-    for mode in ("strict", "lenient"):
-        print(f"best {mode}:", json.dumps(summary.get(f"best_{mode}")))
-    print(f"run directory: {rd}")
-    return 1 if "failed_option_sets" in summary else 0
+        rows += [(name, int(sign_idx[i]), int(post_idx[i]), int(steps[i]), float(root_y[i]),
+                  int(end[i])) for i in range(len(qs))]  # fmt: skip
+    return rows
+
+
+def _refine_best(summary: dict, sets, mode: str, cfg, rng) -> dict | None:
+    """The best ``mode`` ("strict"/"lenient") reading refined, and its steps under noise."""
+    import dataclasses
+
+    cands = [(v["max_steps"], n) for n, v in summary["option_sets"].items() if f"/{mode}/" in n]
+    if not cands:
+        return None
+    steps_best, name = max(cands)
+    entry = summary["option_sets"][name]
+    opts, K = next((o, k) for n, o, k in sets if n == name)
+    signs = np.array(entry["best"]["signs"], float)
+    q_ref, s_ref = refine(signs, np.array(entry["best"]["posture"]), opts, K, cfg.seconds,
+                          cfg.refine_iterations, rng)  # fmt: skip
+    noisy = q_ref + np.concatenate([np.zeros((100, 1)), rng.uniform(-0.01, 0.01, (100, 5))], axis=1)
+    table = TABLES["table2"] * signs
+    params = dataclasses.replace(paper_biped(), friction_ratio=K)
+    s_noisy, _, _ = run_batch(np.repeat(table[None], 100, 0), noisy, opts, cfg.seconds, params)
+    return {
+        "option_set": name,
+        "signs": entry["best"]["signs"],
+        "steps_before_refinement": steps_best,
+        "refined_posture": q_ref.round(6).tolist(),
+        "refined_steps": s_ref,
+        "sensitivity_steps_under_0.01rad_noise": dict(sorted(Counter(s_noisy.tolist()).items())),
+    }
 
 
 def _figures(summary: dict, rd: Path) -> None:

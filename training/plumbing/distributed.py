@@ -1,6 +1,6 @@
 """Independent jobs on Ray (optional extra ``[distributed]``), or serially, in the same order.
 
-The studies and searches (``table2_study``, ``optimize_open_loop``, ``tune_model_controller``)
+The studies and searches (``table2_study``, ``optimize_open_loop``, ``controller.tune``)
 hand their independent batches to :func:`run_tasks`: without Ray they run one after another in
 this process (or, for the controller tuning, in a local process pool); with ``--ray`` each batch
 is a Ray task on one CPU with one numba thread, on a local Ray instance, or on a cluster with
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from training.common import progress
+from training.plumbing.common import progress
 
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Environment of every Ray worker: one thread per task (the task is the unit of parallelism)."""

@@ -227,6 +227,9 @@ class ModelController:
         return kin[axis], J, kin[4 + axis]
 
     # ------------------------------------------------------------------ the law
+    # ~100 lines on purpose: the law reads as the paper's phases in order (stance, swing, start
+    # phase, constraint projection); split, its shared targets and forces would travel through
+    # a dozen arguments.
     def torques(
         self,
         state: SimState,
@@ -345,7 +348,7 @@ class ModelController:
         return tau
 
 
-CONTROLLERS_DIR = Path(__file__).resolve().parent / "controllers"
+CONTROLLERS_DIR = Path(__file__).resolve().parent / "gains"
 """The shipped gain sets (``"model:NAME"`` names ``CONTROLLERS_DIR/NAME.json``)."""
 TEACHER = "model:teacher_robust+start_rest"
 """The teacher: the noise-robust gait and its start phase from rest (docs/walking.md)."""
@@ -360,7 +363,7 @@ def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelControlle
     """The controller of a config string.
 
     ``"model"``: DEFAULT_GAINS; ``"model:NAME"``: the shipped gains ``NAME`` (a file in
-    ``training/controllers``, found from any working directory, e.g. a Ray Tune trial's);
+    ``training/controller/gains``, found from any working directory, e.g. a Ray Tune trial's);
     ``"model:PATH.json"``: the gains in that file. Gains override the defaults. A suffix
     ``+START`` (a name or a path, as the gains) adds a start phase with those gains
     (``"model:teacher_robust+start_rest"``, the teacher from rest and mid-stride).
@@ -376,7 +379,7 @@ def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelControlle
 
 
 def _read_gains(name: str, spec: str) -> dict[str, float]:
-    """The gains of a shipped name (``training/controllers/NAME.json``) or a JSON path."""
+    """The gains of a shipped name (``training/controller/gains/NAME.json``) or a JSON path."""
     shipped = CONTROLLERS_DIR / f"{name}.json"
     path = shipped if "/" not in name and shipped.is_file() else Path(name)
     if not path.is_file():
@@ -407,7 +410,7 @@ def run_episode(env, controller, options=None, seed=None, max_periods=20_000, ca
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m training.model_controller``: run the controller through the env."""
+    """``python -m training.controller.model_controller``: run the controller through the env."""
     from biped_constraint_env.env import ConstrainedBipedEnv
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])

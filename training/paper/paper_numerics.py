@@ -1,6 +1,6 @@
 """The paper's numerics against an accurate reference, on the same Table 2 reading.
 
-    python -m training.paper_numerics [--summary runs/table2_study/<run>/summary.json]
+    python -m training.paper.paper_numerics [--summary runs/table2_study/<run>/summary.json]
 
 Takes the best lenient reading of the Table 2 study (sign mapping, refined posture, K, impact
 option; the values below are the committed study's, or read from ``--summary``) and runs it
@@ -24,8 +24,8 @@ import numpy as np
 from biped_constraint_env import paper_biped
 from biped_constraint_env.modes import EventCode
 from biped_constraint_env.simulator import PAPER_OPTIONS, SimOptions, SimState, step
-from training.common import make_run_dir, parse_config
-from training.open_loop import TABLES
+from training.paper.open_loop import TABLES
+from training.plumbing.common import make_run_dir, parse_config
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Record the teacher's walks as reference motions (npz) for the tracking task.
 
-    python -m training.record_reference [--seconds 10] [--gait-step 5] [--out DIR]
+    python -m training.controller.record_reference [--seconds 10] [--gait-step 5] [--out DIR]
 
 Runs the teacher (``model:teacher_robust+start_rest``) through the walking task (5 ms periods
 ending at each switch, default physics, strict checks, no reset noise) from mid-stride and
@@ -21,7 +21,7 @@ import numpy as np
 from biped_constraint_env.env import ConstrainedBipedEnv
 from biped_constraint_env.observation import OBS_HIP
 from biped_constraint_env.reference import DATA_DIR, REFERENCES, save_reference
-from training.model_controller import TEACHER, controller_from
+from training.controller.model_controller import TEACHER, controller_from
 
 
 def record(

@@ -1,6 +1,7 @@
 """RLlib PPO on ConstrainedBiped-v0 with several env runners: the env in a distributed trainer.
 
-    python -m training.rllib_example [--iterations 5] [--env-runners 2] [--ray-address HOST:PORT]
+    python -m training.plumbing.rllib_example [--iterations 5] [--env-runners 2]
+        [--ray-address HOST:PORT]
 
 A client of the environment, not a second training pipeline: RLlib builds the env in every
 env-runner process from its registered id, ``"biped_constraint_env:ConstrainedBiped-v0"``
@@ -16,7 +17,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from training.distributed import connect, shutdown
+from training.plumbing.distributed import connect, shutdown
 
 ENV = "biped_constraint_env:ConstrainedBiped-v0"
 

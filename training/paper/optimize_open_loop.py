@@ -1,8 +1,9 @@
 """Automating the paper's trial and error: a CMA-ES search (``cma``) for an open-loop table.
 
-    python -m training.optimize_open_loop [--iterations 300] [--population 512] [--restarts 3]
-    python -m training.optimize_open_loop --start midstride   # the start's velocity searched too
-    python -m training.optimize_open_loop --ray [--ray-address HOST:PORT]   # populations on Ray
+    python -m training.paper.optimize_open_loop [--iterations 300] [--population 512]
+        [--restarts 3]
+    python -m training.paper.optimize_open_loop --start midstride  # start velocity searched too
+    python -m training.paper.optimize_open_loop --ray [--ray-address HOST:PORT]  # on Ray
 
 Searches the constant torques per model (4 x 5, within the env's +-150 N m) and the initial
 state that maximise completed walking steps under **strict** physics (the
@@ -35,8 +36,9 @@ from biped_constraint_env import paper_biped
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimArrays, advance
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start, start_slots
-from training.common import make_run_dir, parse_config, progress
-from training.distributed import connect, cpu_count, init_ray, run_tasks, shutdown
+from biped_constraint_env.state import ST_MODE, ST_STEPS
+from training.plumbing.common import make_run_dir, parse_config, progress
+from training.plumbing.distributed import connect, cpu_count, init_ray, run_tasks, shutdown
 
 
 @dataclass
@@ -87,11 +89,11 @@ def score(X: np.ndarray, seconds: float, params=None, options=DEFAULT_OPTIONS, s
     alive_s = np.zeros(n)
     for _ in range(int(round(seconds / 0.02))):
         advance(params, sim, tables, 0.02, options)
-        furthest = np.maximum(furthest, 4 * sim.ist[:, 2] + sim.ist[:, 0] - 1 - first)
+        furthest = np.maximum(furthest, 4 * sim.ist[:, ST_STEPS] + sim.ist[:, ST_MODE] - 1 - first)
         alive_s += 0.02 * (sim.status == 0)
         if (sim.status != 0).all():
             break
-    steps = sim.ist[:, 2].copy()
+    steps = sim.ist[:, ST_STEPS].copy()
     return 100 * steps + 10 * furthest + alive_s, steps
 
 
@@ -150,7 +152,7 @@ def search(cfg: OptimiseConfig, seed: int, show: bool, label: str = ""):
 
 def open_loop_config(x: np.ndarray, start: str):
     """The ``open_loop`` config of candidate x: exact switching through the env, 20 ms periods."""
-    from training.open_loop import OpenLoopConfig
+    from training.paper.open_loop import OpenLoopConfig
 
     q, qd, mode = start_state(x, start)
     return OpenLoopConfig(
@@ -169,7 +171,7 @@ def open_loop_config(x: np.ndarray, start: str):
 
 def robustness(cfg, seeds: int = 10) -> tuple[dict, list[int]]:
     """Through the env: the run of an ``open_loop`` config from its start, then ``seeds`` noisy."""
-    from training.open_loop import noisy_starts, run
+    from training.paper.open_loop import noisy_starts, run
 
     exact = run(cfg, record_frames=False)
     exact = {k: exact[k] for k in ("steps_completed", "distance_m", "end_reason")}
@@ -207,7 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     oc = open_loop_config(x, cfg.start)
     exact, rob = robustness(oc)
     toml = (
-        "# Open-loop table found by training/optimize_open_loop.py under strict physics\n"
+        "# Open-loop table found by training/paper/optimize_open_loop.py under strict physics\n"
         f"# (start {cfg.start!r}, search seed {top['seed']}, {top['steps']} steps in the search;\n"
         f"# through the env: {exact['steps_completed']} steps, {exact['distance_m']:.3f} m, "
         f"ended by {exact['end_reason']};\n"

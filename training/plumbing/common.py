@@ -168,7 +168,7 @@ def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> 
     Every refusal (a missing or malformed file, an unknown key, a value of the wrong type or
     out of range) is one line from argparse (exit status 2), before anything is written.
     """
-    from training.safe_files import UntrustedFileError, read_toml
+    from training.plumbing.safe_files import UntrustedFileError, read_toml
 
     parser = _parser(cls, description)
     args = parser.parse_args(argv)
@@ -301,7 +301,7 @@ def float_in(lo: float, hi: float):
 @contextlib.contextmanager
 def refusals(parser: argparse.ArgumentParser) -> Iterator[None]:
     """Turn a refused file (missing, damaged, untrusted) into the parser's one-line error."""
-    from training.safe_files import UntrustedFileError
+    from training.plumbing.safe_files import UntrustedFileError
 
     try:
         yield
