@@ -151,8 +151,8 @@ class ConstrainedBipedEnv(gym.Env):
     | phase_obs | False | | append the contact clock's phase (below) to the observation |
     | reward | "env" | | "env" (Rewards), "tracking" (a reference walk's; below) or |
     | | | | {"kind", "weights", "kernels"}: any term's weight or kernel (:mod:`.rewards`) |
-    | reference | None | | the reference walk: "midstride", "rest" or an npz path |
-    | | | | (None: "rest" for the rest and mixed starts, else "midstride") |
+    | reference | None | | the reference walk: "midstride", "rest", "own" (each start its |
+    | | | | own kind's recording) or an npz path (None: the start's own; "own" if mixed) |
     | rsi | 0.0 | | fraction of resets at reference states (reference-state starts) |
     | action | "torque" | | "torque", "pd" (PD targets in [-1, 1]^5, below) or a dict: |
     | | | | {"kind": "pd", "around": "fixed" or "reference", "range": 1.0 [rad], |
@@ -213,7 +213,9 @@ class ConstrainedBipedEnv(gym.Env):
       takes a dict of weights and kernels (:data:`~.rewards.REWARD_KINDS`); ``info`` gives the
       terms of the env's own reward kind as ``reward_<term>``, which add up to the reward
       (the tracking reward's were ``track_<term>``, beside walking terms that did not add up);
-      the walking weights with another reward kind are refused. The single and the batched
+      the walking weights with another reward kind are refused. Added: ``reference="own"``
+      (the default of ``start="mixed"``: each start follows its own kind's recording) and PD
+      offsets per model (``action["offset"]`` of 4 x 5). The single and the batched
       env share one core (:mod:`.core`), so their ``info`` keys and values are equal
       (the PD torque and pushes appear in the reset's ``info`` too, zero).
 

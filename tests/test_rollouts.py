@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from training.controller.model_controller import ModelController
 from training.rollouts import run_episodes, run_episodes_batched
@@ -48,3 +49,11 @@ def test_batched_episodes_that_end_at_once_equal_single_ones():
     batched = run_episodes_batched(zero, {}, seeds)
     _check_equal(single, batched)
     assert all(e["t_s"] < 0.01 and e["end"] != "time_limit" for e in batched)
+
+
+def test_report_episodes_last_30_s_at_any_control_period():
+    """``episode_s``: the time limit in seconds (1500 periods at 20 ms, not the registered
+    6000 periods, which would be 120 s)."""
+    kw = {"task": "track", "dt": 0.02, "rsi": 0.0}
+    (ep,) = run_episodes_batched(lambda o: np.zeros((len(o), 5)), kw, [0], episode_s=0.1)
+    assert ep["end"] == "time_limit" and ep["t_s"] == pytest.approx(0.1)

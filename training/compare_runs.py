@@ -27,6 +27,7 @@ import numpy as np
 from training.plumbing.common import CliParser, int_in, refusals, write_text_atomic
 from training.policy_io import available, find_snapshot, load_policy, load_state, policy_actor
 from training.rollouts import run_episodes, summarize
+from training.stats import EPISODE_S
 
 IGNORED = {"seed", "out_dir", "resume", "progress", "total_timesteps"}
 """Config fields that do not make a run a different recipe."""
@@ -58,7 +59,9 @@ def evaluate_run(run: Path, which: str, seeds: list[int]) -> dict:
     policy, norm, cfg, state = load_policy(run, which)
     start = cfg.evaluation_start()
     cfg = replace(cfg, env={**cfg.env, "start": start})
-    eps = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), seeds, cfg.env_id)
+    eps = run_episodes(
+        policy_actor(policy, norm, cfg), cfg.env_kwargs(), seeds, cfg.env_id, episode_s=EPISODE_S
+    )
     row = summarize(f"{run.name} ({which})", eps)
     row.update(num_timesteps=int(state.get("num_timesteps", 0)), start=start)
     return row
@@ -75,7 +78,7 @@ def scaffold_row(config: Path, seeds: list[int]) -> dict:
     def zero(obs):
         return amap(np.zeros((1, 5)), obs[None, :])[0]
 
-    eps = run_episodes(zero, cfg.env_kwargs(), seeds, cfg.env_id)
+    eps = run_episodes(zero, cfg.env_kwargs(), seeds, cfg.env_id, episode_s=EPISODE_S)
     row = summarize(f"zero network output ({config.name})", eps)
     row.update(
         run=str(config),

@@ -54,7 +54,7 @@ from training.rollouts import (
     summarize,
     table_row,
 )
-from training.stats import MIN_STEPS
+from training.stats import EPISODE_S, MIN_STEPS
 
 GIF_MAX_FRAMES = 500
 MIN_STEPS_FROM_REST = MIN_STEPS
@@ -110,7 +110,9 @@ def figures(actor, cfg, seed_best: int, seed_worst: int, eps_by_seed: dict, out_
             if name == "best" and len(images) < GIF_MAX_FRAMES:
                 images.append(env.render())
 
-        run_episodes(actor, cfg.env_kwargs(), [seed], cfg.env_id, record=record)
+        run_episodes(
+            actor, cfg.env_kwargs(), [seed], cfg.env_id, record=record, episode_s=EPISODE_S
+        )
         if images:
             plots.save_gif(images, out_dir / "figures" / f"{name}.gif", fps=50)
         e = eps_by_seed[seed]
@@ -144,7 +146,7 @@ def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
             )
 
     kw = {**cfg.env_kwargs(), "start": "rest"}
-    (ep,) = run_episodes(actor, kw, [seed], cfg.env_id, record=record)
+    (ep,) = run_episodes(actor, kw, [seed], cfg.env_id, record=record, episode_s=EPISODE_S)
     first = f"first step at {ep['step_t_s'][0]:.2f} s" if ep["step_t_s"] else "no step"
     plots.initiation_strip(
         frames,
@@ -172,7 +174,7 @@ def controller_batch(spec: str, n: int):
 def batched_row(label: str, act, env_kw: dict, seeds, env_id: str, rest: bool = False) -> dict:
     """A row of ``seeds`` episodes run at once in the batched env (initiation from rest)."""
     t0 = time.time()
-    row = summarize(label, run_episodes_batched(act, env_kw, seeds, env_id))
+    row = summarize(label, run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S))
     if rest:
         row["initiation"] = initiation(row["episodes"], MIN_STEPS_FROM_REST)
     print(f"{table_row(row)} ({time.time() - t0:.0f} s)", flush=True)

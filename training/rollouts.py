@@ -26,6 +26,18 @@ COMPARE_PUSH = {"push_impulse_ns": -0.25, "push_at_s": 2.0}
 the episode (the env's ``perturbations`` option: through the constrained impulse map)."""
 
 
+def _time_limit(env_kwargs: dict, episode_s: float | None) -> dict:
+    """``max_episode_steps`` of ``episode_s`` [s] at the env's control period.
+
+    None: the env's registered limit (6000 periods).
+    """
+    if episode_s is None:
+        return {}
+    from biped_constraint_env.settings import make_settings
+
+    return {"max_episode_steps": max(1, round(episode_s / make_settings(**env_kwargs).dt))}
+
+
 def run_episodes(
     actor: Callable[[np.ndarray], np.ndarray],
     env_kwargs: dict,
@@ -33,6 +45,7 @@ def run_episodes(
     env_id: str = "ConstrainedBiped-v0",
     record=None,
     desc: str = "",
+    episode_s: float | None = None,
 ) -> list[dict]:
     """Run one episode per seed; per episode: steps, distance, speed, torque cost, end.
 
@@ -45,7 +58,8 @@ def run_episodes(
     import biped_constraint_env  # noqa: F401
     from training.plumbing.common import progress
 
-    env = gym.make(env_id, **env_kwargs, render_mode="rgb_array" if record else None)
+    env = gym.make(env_id, **env_kwargs, **_time_limit(env_kwargs, episode_s),
+                   render_mode="rgb_array" if record else None)  # fmt: skip
     params = env.unwrapped.params
     weight = params.total_mass_kg * params.gravity_mps2
     out = []
@@ -100,6 +114,7 @@ def run_episodes_batched(
     seeds: Sequence[int],
     env_id: str = "ConstrainedBiped-v0",
     num_threads: int = 1,
+    episode_s: float | None = None,
 ) -> list[dict]:
     """:func:`run_episodes`' episodes, all at once in the batched vector env.
 
@@ -124,6 +139,7 @@ def run_episodes_batched(
         vectorization_mode="vector_entry_point",
         num_threads=num_threads,
         **env_kwargs,
+        **_time_limit(env_kwargs, episode_s),
     )
     obs, info = venv.reset(seed=[int(s) for s in seeds])
     y0 = info["hip_y"].copy()
