@@ -106,3 +106,31 @@ def test_committed_from_scratch_policy_learned_without_a_teacher_and_walks():
     kw = cfg.env_kwargs()
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id)
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
+
+
+@pytest.mark.parametrize(
+    "name, starts",
+    [("ppo_walker_50hz", ("midstride", "rest")), ("ppo_alone_50hz", ("midstride",))],
+)
+def test_committed_50hz_policies_walk_at_20_ms_with_what_they_say_in_the_loop(name, starts):
+    """The 50 Hz policies: PD targets every 20 ms (the PD law every 5 ms), trained by PPO from a
+    random network; ppo_walker_50hz with the reference pose in the loop (and pushes and
+    randomised models in training), ppo_alone_50hz the network alone (a fixed PD pose, the
+    clock but no reference in its input). One held-out 30 s episode per start walks."""
+    import torch
+
+    from training.policy_io import available, load_policy, policy_actor
+    from training.rollouts import run_episodes
+
+    torch.set_num_threads(1)
+    path = POLICY.parent / name
+    policy, norm, cfg, _ = load_policy(path, "best")
+    assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
+    s = cfg.settings()
+    assert s.dt == 0.02 and s.action.pd and s.action.pd_substeps == 4
+    assert s.action.around == ("reference" if name == "ppo_walker_50hz" else "fixed")
+    assert not s.observation.reference_obs and s.observation.phase_obs
+    for start in starts:
+        kw = {**cfg.env_kwargs(), "start": start}
+        (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id, episode_s=30)
+        assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", (start, ep)
