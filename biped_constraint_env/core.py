@@ -86,6 +86,7 @@ class EnvCore:
             self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(np.ones(n, np.int64))
         self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
         self._track = s.reward.kind == "tracking"
+        self._pd = a.pd
         self._pushes = s.perturbations.push_impulse_ns is not None
         self._noisy = s.perturbations.obs_noise is not None
         self.reward_keys = s.reward.info_keys
@@ -252,7 +253,7 @@ class EnvCore:
                    "switches": switches, "events": events,
                    "termination_reason": self._reasons.copy()}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms.T.copy(), strict=True))
-        if self.settings.action.pd:  # the period's time-mean PD torque
+        if self._pd:  # the period's time-mean PD torque
             out["torque"] = self.buf.act[row].copy() if one else self.buf.act.copy()
         if self._pushes:
             p = self.perturb
