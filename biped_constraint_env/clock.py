@@ -70,6 +70,10 @@ class ContactClock:
             self.j[stepped], self.first[stepped] = j[stepped], first[stepped]
             self.mode[stepped] = modes_after[stepped]
 
+    def model_time_s(self) -> np.ndarray:
+        """(n,): the time since each environment's current model began [s] (unclipped)."""
+        return self.j * self.dt
+
     def features(self) -> np.ndarray:
         """(n, 2): the first-step flag and the time in the current model [s] (clipped)."""
         t = np.minimum(self.j * self.dt, MODEL_TIME_MAX_S)

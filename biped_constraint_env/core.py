@@ -17,6 +17,7 @@ import numpy as np
 
 from .actions import TORQUE_ACTIONS, action_config, validate_actions
 from .clock import ContactClock
+from .gait import GaitReward
 from .model import N_ACTUATED
 from .modes import EventCode
 from .observation import observation_space
@@ -86,6 +87,8 @@ class EnvCore:
             self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(np.ones(n, np.int64))
         self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
         self._track = s.reward.kind == "tracking"
+        self.gait = GaitReward(s.reward, p.dt, n) if s.reward.kind == "gait" else None
+        self._count_steps = self._track or self.gait is not None
         self._pd = a.pd
         self._pushes = s.perturbations.push_impulse_ns is not None
         self._noisy = s.perturbations.obs_noise is not None
@@ -145,7 +148,8 @@ class EnvCore:
             rows = range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
             actions = self.perturb.before_period(actions.astype(np.float64), rngs, rows)
         buf.act[:] = actions
-        steps0 = sim.ist[:, ST_STEPS].copy() if self._track else None
+        steps0 = sim.ist[:, ST_STEPS].copy() if self._count_steps else None
+        hip_y0 = self.hip[:, 0].copy() if self.gait is not None else None
         if skip is not None:
             sim.status[skip] = NOT_STEPPED
         if buf.period():
@@ -173,10 +177,23 @@ class EnvCore:
             if skip is not None:
                 track[skip] = 0.0
             self._terms, rewards = track[:, :-1], track[:, -1].copy()
+        elif self.gait is not None:
+            self._terms, rewards = self._gait_terms(hip_y0, sim.ist[:, ST_STEPS] - steps0,
+                                                    ~terminated, skip)  # fmt: skip
         else:
             self._terms, rewards = buf.rew[:, : len(REWARD_TERMS)], buf.rew[:, -1].copy()
         self._set_reasons(terminated)
         return rewards, terminated
+
+    def _gait_terms(self, hip_y0, steps, alive, skip) -> tuple[np.ndarray, np.ndarray]:
+        """The gait reward's terms (n, 5) and rewards (n,) of the period (:mod:`.gait`)."""
+        sim, g = self.sim, self.gait
+        swing_vy = g.swing_ankle_vy(self.buf.chs, sim.q, sim.qd, sim.ist)
+        out = g.terms(self.hip[:, 0] - hip_y0, self.hip[:, 1], swing_vy, sim.ist[:, ST_MODE],
+                      self.clock.model_time_s(), steps, alive)  # fmt: skip
+        if skip is not None:
+            out[skip] = 0.0
+        return out[:, :-1], out[:, -1].copy()
 
     def _set_reasons(self, terminated: np.ndarray) -> None:
         """The termination reason of every row (None where it goes on)."""

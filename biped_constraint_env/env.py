@@ -149,8 +149,9 @@ class ConstrainedBipedEnv(gym.Env):
     | fall_hip_height_m | None | | end the episode when the hip is below [m] |
     | posture | NOMINAL_POSTURE_RAD | | start posture of ``start="rest"`` [rad] |
     | phase_obs | False | | append the contact clock's phase (below) to the observation |
-    | reward | "env" | | "env" (Rewards), "tracking" (a reference walk's; below) or |
-    | | | | {"kind", "weights", "kernels"}: any term's weight or kernel (:mod:`.rewards`) |
+    | reward | "env" | | "env" (Rewards), "tracking" (a reference walk's; below), "gait" |
+    | | | | (the task and the contact clock, no recording; below) or {"kind", "weights", |
+    | | | | "kernels", "targets"}: any term's weight, kernel or target (:mod:`.rewards`) |
     | reference | None | | the reference walk: "midstride", "rest", "own" (each start its |
     | | | | own kind's recording) or an npz path (None: the start's own; "own" if mixed) |
     | rsi | 0.0 | | fraction of resets at reference states (reference-state starts) |
@@ -185,6 +186,12 @@ class ConstrainedBipedEnv(gym.Env):
     switch; a start follows its own reference's first step (rest with "rest", mid-stride with
     "midstride").
 
+    ``reward="gait"`` (:mod:`.gait`) needs no recorded motion: kernels of the period's hip speed
+    against a commanded speed, of the hip height, of the swing ankle's forward speed while the
+    swing leg is free (periodic foot speed), and of the time held in the current model (the
+    contact clock), plus 1 per completed step; each target is a setting
+    (``reward={"kind": "gait", "targets": {"speed": 0.8}}``).
+
     ## Version History
     * v0 (unreleased, the only id): accurate physics and the walking task by default; the
       paper's setting is ``task="paper"``. Changed: a preset's substeps now scale with ``dt``
@@ -218,6 +225,7 @@ class ConstrainedBipedEnv(gym.Env):
       offsets per model (``action["offset"]`` of 4 x 5). The single and the batched
       env share one core (:mod:`.core`), so their ``info`` keys and values are equal
       (the PD torque and pushes appear in the reset's ``info`` too, zero).
+      Added: ``reward="gait"`` and the reward's ``targets``.
 
     Example:
         >>> import gymnasium as gym

@@ -282,3 +282,16 @@ def point_bias_acceleration_fd(chain: ChainModel, q, qd, link: int, s: float, h:
 def keypoints(chain: ChainModel, q, root_y: float = 0.0) -> np.ndarray:
     """(9, 2) world positions [m] of the keypoints in :data:`KEYPOINT_NAMES` order."""
     return nb_keypoints(chain.packed, chain.packed_scalars, _vec6("q", q), float(root_y))
+
+
+@njit(cache=True)
+def nb_swing_ankle_vy(CHS, Q, QD, IST, out):
+    """out[i]: the forward velocity [m/s] of row i's swing ankle (joint 5).
+
+    CHS (n, 2, 6, 6): each row's packed robot in both numberings; IST[i, 1] the stance side.
+    """
+    K = np.empty((N_LINKS, NK))
+    z = np.zeros(N_LINKS)
+    for i in range(Q.shape[0]):
+        nb_fk(CHS[i, IST[i, 1]], Q[i], QD[i], z, 0.0, K)
+        out[i] = K[5, K_VY]

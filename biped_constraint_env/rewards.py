@@ -33,13 +33,15 @@ TERMINATION_FALL = "fall"
 class RewardTerm:
     """One named reward term: its default weight and, for a kernel term, its kernel scale.
 
-    A kernel term is weight * exp(-kernel * squared error).
+    A kernel term is weight * exp(-kernel * squared error); ``target``, where the term has one,
+    is the value its error is measured from (the gait reward's commanded speed, height...).
     """
 
     name: str
     weight: float
     kernel: float | None = None
     doc: str = ""
+    target: float | None = None
 
 
 REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
@@ -57,10 +59,39 @@ REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
         RewardTerm("hip_speed", 0.2, 5.0, "kernel of the hip speed's squared error [(m/s)^2]"),
         RewardTerm("step", 1.0, doc="weight per completed walking step"),
     ),
+    "gait": (
+        RewardTerm(
+            "speed",
+            0.4,
+            0.5,
+            target=1.1,
+            doc="kernel of (the period's mean hip speed - target [m/s])^2",
+        ),
+        RewardTerm("height", 0.2, 50.0, target=2.95, doc="kernel of (hip height - target [m])^2"),
+        RewardTerm(
+            "swing",
+            0.2,
+            1.0,
+            target=1.0,
+            doc="models 1, 2: kernel of min(0, swing ankle speed - target [m/s])^2; "
+            "models 3, 4: the weight",
+        ),
+        RewardTerm(
+            "cadence",
+            0.2,
+            10.0,
+            target=0.7,
+            doc="kernel of max(0, time in the current model - target [s])^2",
+        ),
+        RewardTerm("step", 1.0, doc="weight per completed walking step"),
+    ),
 }
 """The reward kinds and their terms. The tracking kernels' weights sum to 1 (a period on the
 reference earns 1) and each halves its term at an error of about 0.37 rad (one angle),
-3.7 rad/s, 59 mm and 0.37 m/s; a step takes about 170 periods of 5 ms."""
+3.7 rad/s, 59 mm and 0.37 m/s; a step takes about 170 periods of 5 ms. The gait kernels' weights
+sum to 1 too, with no recorded motion: its targets are round numbers of the task (a 1.1 m/s walk
+at the hip height of a straight-legged stance, the swing foot moving forward, no contact phase
+held beyond 0.7 s), overridable (``reward={"kind": "gait", "targets": {"speed": 0.8}}``)."""
 
 REWARD_TERMS = tuple(f"reward_{t.name}" for t in REWARD_KINDS["env"])
 """``info`` keys of the walking reward's terms (the compiled reward's columns, in order)."""
@@ -78,6 +109,7 @@ class RewardSettings:
     kind: str
     weights: tuple[float, ...]
     kernels: tuple[float | None, ...]
+    targets: tuple[float | None, ...] = ()
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -97,21 +129,29 @@ class RewardSettings:
         """The kernel scale of ``term`` (a kernel term)."""
         return self.kernels[self.terms.index(term)]
 
+    def target(self, term: str) -> float:
+        """The target of ``term`` (a term with one)."""
+        return self.targets[self.terms.index(term)]
+
     def as_dict(self) -> dict[str, Any]:
-        """``{"kind", "weights", "kernels"}`` as the ``reward`` kwarg takes it."""
+        """``{"kind", "weights", "kernels"[, "targets"]}`` as the ``reward`` kwarg takes it."""
         kernels = {t: k for t, k in zip(self.terms, self.kernels, strict=True) if k is not None}
-        return {"kind": self.kind, "weights": dict(zip(self.terms, self.weights, strict=True)),
-                "kernels": kernels}  # fmt: skip
+        out = {"kind": self.kind, "weights": dict(zip(self.terms, self.weights, strict=True)),
+               "kernels": kernels}  # fmt: skip
+        targets = {t: v for t, v in zip(self.terms, self.targets, strict=True) if v is not None}
+        if targets:
+            out["targets"] = targets
+        return out
 
 
 def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
-    """The ``reward`` kwarg (a kind's name or ``{"kind", "weights", "kernels"}``) validated.
+    """The ``reward`` kwarg (a kind's name or ``{"kind", "weights", "kernels", "targets"}``).
 
     ``env_weights``: the :data:`ENV_WEIGHT_KWARGS` given (None: the registry's); they set the
     ``"env"`` kind's weights and are refused with another kind (they would do nothing).
     """
     spec = {"kind": reward} if isinstance(reward, str) else reward
-    check_mapping("reward", spec, ("kind", "weights", "kernels"))
+    check_mapping("reward", spec, ("kind", "weights", "kernels", "targets"))
     kind = check_choice("reward kind", spec.get("kind", "env"), sorted(REWARD_KINDS))
     terms = REWARD_KINDS[kind]
     names = [t.name for t in terms]
@@ -132,8 +172,15 @@ def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
                                      kernel_names).items():  # fmt: skip
         kernels[name] = check_real(f"reward kernel {name!r}", value, 0.0, REWARD_WEIGHT_MAX,
                                    low_open=True)  # fmt: skip
+    targets = {t.name: t.target for t in terms}
+    target_names = [t.name for t in terms if t.target is not None]
+    for name, value in check_mapping("reward targets", spec.get("targets", {}),
+                                     target_names).items():  # fmt: skip
+        targets[name] = check_real(f"reward target {name!r}", value, -REWARD_WEIGHT_MAX,
+                                   REWARD_WEIGHT_MAX)  # fmt: skip
     return RewardSettings(kind, tuple(weights[n] for n in names),
-                          tuple(kernels[n] for n in names))  # fmt: skip
+                          tuple(kernels[n] for n in names),
+                          tuple(targets[n] for n in names))  # fmt: skip
 
 
 REWARD_WEIGHT_MAX = 1e6

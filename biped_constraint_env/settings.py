@@ -172,8 +172,8 @@ class EnvSettings:
 
     @property
     def needs_clock(self) -> bool:
-        """Whether the env keeps a contact clock (phase observed, or the reference read)."""
-        return self.observation.phase_obs or self.needs_reference
+        """Whether the env keeps a contact clock (phase observed, the gait reward, a reference)."""
+        return self.observation.phase_obs or self.reward.kind == "gait" or self.needs_reference
 
     def as_dict(self) -> dict[str, Any]:
         """The settings as plain data (numbers, strings, lists), in their groups."""

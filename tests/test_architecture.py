@@ -1,7 +1,7 @@
 """One direction of dependency: jit (how the core is compiled) and validation (argument
 checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> the simulator
 (state -> options -> stepper -> advance -> simulator, its Python API) -> the env's parts
-(tasks, actions, starts, rewards, observation, reference, perturbations) -> settings (all the
+(tasks, actions, starts, rewards, gait, observation, reference, perturbations) -> settings (all the
 env's arguments, validated once) -> tracking -> period (the compiled control period) -> core
 (N rows around it: starts, reasons, rewards, info) -> env (its one-row case) -> vector_env.
 Each module may import only modules of lower or equal rank."""
@@ -36,6 +36,7 @@ LAYERS = [
     "actions",
     "starts",
     "rewards",
+    "gait",
     "clock",
     "observation",
     "reference",
