@@ -101,7 +101,11 @@ class ConstrainedBipedEnv(gym.Env):
     ``MIDSTRIDE_THETA0_RANGE_RAD`` (-0.25 to -0.15 rad). ``start="rest"`` (``task="paper"``'s
     default; with the walking task, the paper's scene): model 1, leg A standing at rest in
     ``posture`` (default ``NOMINAL_POSTURE_RAD``, the paper's Fig. 2). ``start="mixed"``: rest
-    or mid-stride, 1/2 each (for learning both starts). All add
+    or mid-stride, 1/2 each (for learning both starts). ``start="stride"``: the mid-stride start
+    with the swing leg drawn along its swing (its thigh from 0.3 rad behind to 0.4 rad in front
+    of straight down, the knee bent 0.05-0.6 rad, the thigh turning forward at 0-2 rad/s, the
+    foot level; ``STRIDE_*`` in :mod:`.starts`): a training start spread over the step's
+    contact phases with no recorded motion. All add
     uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` (0.01 rad) to q1..q5; the
     stance toe is at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
     starts from any state in the coordinates of docs/conventions.md (validated: points on or
@@ -225,7 +229,7 @@ class ConstrainedBipedEnv(gym.Env):
       offsets per model (``action["offset"]`` of 4 x 5). The single and the batched
       env share one core (:mod:`.core`), so their ``info`` keys and values are equal
       (the PD torque and pushes appear in the reset's ``info`` too, zero).
-      Added: ``reward="gait"`` and the reward's ``targets``.
+      Added: ``reward="gait"`` and the reward's ``targets``; ``start="stride"``.
 
     Example:
         >>> import gymnasium as gym

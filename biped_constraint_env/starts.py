@@ -20,8 +20,17 @@ MIDSTRIDE_RATE_RANGE_RAD_S = (-1.1, -0.9)
 """Range of the stance foot's turning rate about the toe at a mid-stride start [rad/s]."""
 MIDSTRIDE_THETA0_RANGE_RAD = (-0.25, -0.15)
 """Range of the stance foot's heel-up angle theta0 at a mid-stride start [rad]."""
-STARTS = ("rest", "midstride", "mixed")
-"""Values of the env's ``start`` argument ("mixed": rest or mid-stride, 1/2 each)."""
+STRIDE_SWING_RANGE_RAD = (-0.3, 0.4)
+"""Range of the swing thigh's direction at a stride start [rad from straight down, + forward]:
+from the mid-stride start's (0.3 rad behind) to in front of the hip, ready to strike."""
+STRIDE_KNEE_RANGE_RAD = (-0.6, -0.05)
+"""Range of the swing knee's angle q4 at a stride start [rad] (bent as the mid-stride start's,
+to nearly straight)."""
+STRIDE_SWING_RATE_RANGE_RAD_S = (0.0, 2.0)
+"""Range of the swing thigh's forward turning rate at a stride start [rad/s]."""
+STARTS = ("rest", "midstride", "mixed", "stride")
+"""Values of the env's ``start`` argument ("mixed": rest or mid-stride, 1/2 each; "stride": the
+mid-stride start with its swing leg drawn along its swing)."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 MAX_RESET_NOISE_RAD = 1.0
@@ -51,7 +60,12 @@ def _uniform(rng: np.random.Generator, low: float, high: float, size: int | None
 
 
 def midstride_start(
-    rate: float = -1.0, theta0: float = -0.2, lean: float = 0.1
+    rate: float = -1.0,
+    theta0: float = -0.2,
+    lean: float = 0.1,
+    swing: float = -0.3,
+    knee: float = -0.6,
+    swing_rate: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(q, qd) of a model-2 state in mid-stride, leg A on its toe, turning at ``rate`` [rad/s].
 
@@ -59,14 +73,19 @@ def midstride_start(
     ``lean`` [rad] with its knee bent 0.05 rad, the swing leg is behind (thigh 0.3 rad back,
     knee bent 0.6 rad, foot level), and the whole body turns forward about the stance toe at
     ``rate`` (< 0: forward) with the swing thigh keeping its direction.
+
+    ``swing``, ``knee`` and ``swing_rate`` place the swing leg elsewhere on its swing (a stride
+    start): the swing thigh's direction [rad from straight down, + forward], the knee angle q4
+    [rad] and the thigh's forward turning rate [rad/s], the swing foot kept level.
     """
-    if not (math.isfinite(rate) and math.isfinite(theta0) and math.isfinite(lean)) or theta0 > 0:
-        raise ValueError(f"need finite rate, lean and theta0 <= 0, got {rate}, {theta0}, {lean}")
+    values = (rate, theta0, lean, swing, knee, swing_rate)
+    if not all(math.isfinite(v) for v in values) or theta0 > 0:
+        raise ValueError(f"need finite values and theta0 <= 0, got {values}")
     q1 = -lean - theta0
-    q2, sw, q4 = 0.05, -0.3, -0.6
-    q3 = sw - (theta0 + q1 + q2)
-    q = np.array([theta0, q1, q2, q3, q4, -(sw + q4)])
-    return q, np.array([rate, 0.0, 0.0, -rate, 0.0, 0.0])
+    q2 = 0.05
+    q3 = swing - (theta0 + q1 + q2)
+    q = np.array([theta0, q1, q2, q3, knee, -(swing + knee)])
+    return q, np.array([rate, 0.0, 0.0, swing_rate - rate, 0.0, -swing_rate])
 
 
 def sample_start(
@@ -77,8 +96,10 @@ def sample_start(
     "rest": ``posture`` at rest in model 1; "midstride": :func:`midstride_start` with the rate
     and theta0 drawn uniformly from :data:`MIDSTRIDE_RATE_RANGE_RAD_S` and
     :data:`MIDSTRIDE_THETA0_RANGE_RAD`, in model 2; "mixed": one of the two, with probability
-    1/2 each (one more uniform draw first). Both add uniform noise in
-    [-noise_scale, noise_scale] to q1..q5 [rad].
+    1/2 each (one more uniform draw first); "stride": the mid-stride start with the swing leg
+    drawn uniformly along its swing (:data:`STRIDE_SWING_RANGE_RAD`,
+    :data:`STRIDE_KNEE_RANGE_RAD`, :data:`STRIDE_SWING_RATE_RANGE_RAD_S`; three more draws).
+    All add uniform noise in [-noise_scale, noise_scale] to q1..q5 [rad].
     """
     if start == "mixed":
         start = "rest" if rng.random() < 0.5 else "midstride"
@@ -86,7 +107,13 @@ def sample_start(
         return sample_initial_q(rng, posture, noise_scale), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
     rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)
     theta0 = _uniform(rng, *MIDSTRIDE_THETA0_RANGE_RAD)
-    q, qd = midstride_start(rate, theta0)
+    if start == "stride":
+        swing = _uniform(rng, *STRIDE_SWING_RANGE_RAD)
+        knee = _uniform(rng, *STRIDE_KNEE_RANGE_RAD)
+        swing_rate = _uniform(rng, *STRIDE_SWING_RATE_RANGE_RAD_S)
+        q, qd = midstride_start(rate, theta0, swing=swing, knee=knee, swing_rate=swing_rate)
+    else:
+        q, qd = midstride_start(rate, theta0)
     q[1:] += _uniform(rng, -noise_scale, noise_scale, N_LINKS - 1)
     return q, qd, int(Mode.TOE_PIVOT)
 

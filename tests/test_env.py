@@ -311,6 +311,45 @@ def test_midstride_start():
         midstride_start(-1.0, 0.1)
 
 
+def test_stride_start_draws_the_swing_leg_along_its_swing():
+    """``start="stride"``: model 2 as the mid-stride start, the swing thigh's direction, knee and
+    forward rate drawn over their documented ranges, the swing foot level; single = batched."""
+    from biped_constraint_env.kinematics import link_angles
+    from biped_constraint_env.starts import (
+        STRIDE_KNEE_RANGE_RAD,
+        STRIDE_SWING_RANGE_RAD,
+        STRIDE_SWING_RATE_RANGE_RAD_S,
+        check_start_state,
+        midstride_start,
+    )
+
+    env = ConstrainedBipedEnv(start="stride", reset_noise_scale=0.0)
+    swings, knees, rates = [], [], []
+    for seed in range(200):
+        _, info = env.reset(seed=seed)
+        st = env.state
+        assert info["mode"] == 2
+        check_start_state(env.params, st)
+        phi = link_angles(st.q)
+        swings.append(phi[3] - 1.5 * np.pi)  # the swing thigh, hip -> knee, from straight down
+        knees.append(st.q[4])
+        rates.append(np.sum(st.qd[:4]))  # the swing thigh's absolute turning rate
+        assert np.sin(phi[5]) == pytest.approx(0.0, abs=1e-12)  # the swing foot level
+        assert np.sum(st.qd) == pytest.approx(0.0, abs=1e-12)  # and keeping its direction
+    for values, (lo, hi) in ((swings, STRIDE_SWING_RANGE_RAD), (knees, STRIDE_KNEE_RANGE_RAD),
+                             (rates, STRIDE_SWING_RATE_RANGE_RAD_S)):  # fmt: skip
+        assert lo - 1e-12 <= min(values) < lo + 0.2 * (hi - lo)
+        assert hi - 0.2 * (hi - lo) < max(values) <= hi + 1e-12
+    q, qd = midstride_start(-1.0, -0.2, swing=-0.3, knee=-0.6, swing_rate=0.0)
+    np.testing.assert_array_equal((q, qd), midstride_start(-1.0, -0.2))
+    venv = gym.make_vec("ConstrainedBiped-v0", 3, vectorization_mode="vector_entry_point",
+                        start="stride")  # fmt: skip
+    vobs, _ = venv.reset(seed=7)
+    for i in range(3):
+        np.testing.assert_array_equal(ConstrainedBipedEnv(start="stride").reset(seed=7 + i)[0],
+                                      vobs[i])  # fmt: skip
+
+
 def test_start_draws_equal_numpy_uniform():
     """The starts' cheaper uniform draws are numpy's ``Generator.uniform`` numbers exactly."""
     from biped_constraint_env.starts import _uniform

@@ -143,7 +143,8 @@ def _parser(cls: type, description: str) -> argparse.ArgumentParser:
     for f in dataclasses.fields(cls):
         flag = "--" + f.name.replace("_", "-")
         kind = hints[f.name]
-        text = f"{helps.get(f.name, '')} (default: {f.default})".strip()
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        text = f"{helps.get(f.name, '')} (default: {default})".strip()
         if kind is dict:  # a table: KEY=VALUE items on top of the config file's table
             parser.add_argument(flag, nargs="+", default=None, help=text, metavar="KEY=VALUE")
         elif getattr(kind, "__origin__", None) is tuple:
