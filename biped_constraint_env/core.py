@@ -27,6 +27,7 @@ from .rewards import (
     REWARD_KINDS,
     REWARD_TERMS,
     TERMINATION_FALL,
+    TERMINATION_MODEL_TIME,
     TERMINATION_NON_FINITE,
     reward_config,
 )
@@ -89,6 +90,8 @@ class EnvCore:
         self._track = s.reward.kind == "tracking"
         self.gait = GaitReward(s.reward, p.dt, n) if s.reward.kind == "gait" else None
         self._count_steps = self._track or self.gait is not None
+        self._max_model_t = s.max_model_time_s
+        self._held = np.zeros(n, bool)  # rows ended by max_model_time_s this period
         self._pd = a.pd
         self._pushes = s.perturbations.push_impulse_ns is not None
         self._noisy = s.perturbations.obs_noise is not None
@@ -171,6 +174,11 @@ class EnvCore:
             terminated[0] = sim.status.item(0) > 0 or buf.fell.item(0) != 0
         else:
             terminated = (sim.status > 0) | (buf.fell != 0)
+        if self._max_model_t is not None:  # early termination: a contact phase held too long
+            self._held = self.clock.model_time_s() > self._max_model_t + 1e-9
+            if skip is not None:
+                self._held[skip] = False
+            terminated |= self._held
         if self._track:
             track = self.tracking.reward(sim.q, sim.qd, self.hip, sim.ist[:, ST_STEPS] - steps0,
                                          ~terminated)  # fmt: skip
@@ -208,8 +216,10 @@ class EnvCore:
                 reasons[i] = next(e.code.name.lower() for e in sim.events_of(int(i)) if e.terminal)
             elif sim.status[i] == STATUS_NONFINITE:
                 reasons[i] = TERMINATION_NON_FINITE
-            else:
+            elif self.buf.fell[i]:
                 reasons[i] = TERMINATION_FALL
+            else:
+                reasons[i] = TERMINATION_MODEL_TIME
 
     def clear_period(self) -> None:
         """Forget the last period (after a reset: no events, zero terms, no reasons)."""

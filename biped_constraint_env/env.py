@@ -120,7 +120,9 @@ class ConstrainedBipedEnv(gym.Env):
     ``strict=True``), ``step_behind_stance_toe``, ``zeno``, ``non_finite`` (the
     numerical state blew up; the observation is the last finite state), and, only if
     ``fall_hip_height_m`` is set, ``fall`` (the hip below that height [m] at the end of a
-    period; off by default). A fall is one of
+    period; off by default), and, only if ``max_model_time_s`` is set, ``model_time`` (one
+    contact phase held longer than that [s], by the contact clock: an early termination for
+    learning, as legged-robot RL ends episodes on a bad posture). A fall is one of
     these (a knee or the hip below the ground).
     ### Truncation
     By the time limit only: ``max_episode_steps=6000`` control periods at registration (30 s
@@ -151,6 +153,7 @@ class ConstrainedBipedEnv(gym.Env):
     | step_bonus, ctrl_cost_weight | 5, 0.1 | | weights (Rewards) |
     | reset_noise_scale | 0.01 | | uniform noise on q1..q5 [rad] |
     | fall_hip_height_m | None | | end the episode when the hip is below [m] |
+    | max_model_time_s | None | | end the episode when one model has lasted longer [s] |
     | posture | NOMINAL_POSTURE_RAD | | start posture of ``start="rest"`` [rad] |
     | phase_obs | False | | append the contact clock's phase (below) to the observation |
     | reward | "env" | | "env" (Rewards), "tracking" (a reference walk's; below), "gait" |
@@ -229,7 +232,8 @@ class ConstrainedBipedEnv(gym.Env):
       offsets per model (``action["offset"]`` of 4 x 5). The single and the batched
       env share one core (:mod:`.core`), so their ``info`` keys and values are equal
       (the PD torque and pushes appear in the reset's ``info`` too, zero).
-      Added: ``reward="gait"`` and the reward's ``targets``; ``start="stride"``.
+      Added: ``reward="gait"`` and the reward's ``targets``; ``start="stride"``;
+      ``max_model_time_s``.
 
     Example:
         >>> import gymnasium as gym

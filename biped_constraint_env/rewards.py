@@ -27,6 +27,8 @@ from .validation import check_choice, check_mapping, check_real
 
 TERMINATION_NON_FINITE = "non_finite"
 TERMINATION_FALL = "fall"
+TERMINATION_MODEL_TIME = "model_time"
+"""The reason of an episode ended by ``max_model_time_s`` (a contact phase held too long)."""
 
 
 @dataclass(frozen=True)

@@ -154,6 +154,7 @@ class EnvSettings:
     perturbations: PerturbationSettings
     reference: str
     fall_hip_height_m: float | None
+    max_model_time_s: float | None = None
 
     @property
     def dt(self) -> float:
@@ -173,7 +174,8 @@ class EnvSettings:
     @property
     def needs_clock(self) -> bool:
         """Whether the env keeps a contact clock (phase observed, the gait reward, a reference)."""
-        return self.observation.phase_obs or self.reward.kind == "gait" or self.needs_reference
+        return (self.observation.phase_obs or self.reward.kind == "gait"
+                or self.max_model_time_s is not None or self.needs_reference)  # fmt: skip
 
     def as_dict(self) -> dict[str, Any]:
         """The settings as plain data (numbers, strings, lists), in their groups."""
@@ -186,7 +188,8 @@ class EnvSettings:
             return x
 
         out: dict[str, Any] = {"task": self.task, "reference": self.reference,
-                               "fall_hip_height_m": self.fall_hip_height_m}  # fmt: skip
+                               "fall_hip_height_m": self.fall_hip_height_m,
+                               "max_model_time_s": self.max_model_time_s}  # fmt: skip
         p = self.physics
         out["physics"] = {
             "params": "paper_biped" if p.params == paper_biped() else "custom",
@@ -304,6 +307,7 @@ def make_settings(
     ctrl_cost_weight: float | None = None,
     reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
     fall_hip_height_m: float | None = None,
+    max_model_time_s: float | None = None,
     posture=NOMINAL_POSTURE_RAD,
     start: str | None = None,
     phase_obs: bool | None = None,
@@ -350,7 +354,15 @@ def make_settings(
         perturbations=perturbation_settings(perturbations),
         reference=_reference(reference, start_kind),
         fall_hip_height_m=check_fall_height(fall_hip_height_m),
+        max_model_time_s=_check_model_time(max_model_time_s),
     )
+
+
+def _check_model_time(max_model_time_s) -> float | None:
+    """The validated ``max_model_time_s`` [s] (None: off)."""
+    if max_model_time_s is None:
+        return None
+    return check_real("max_model_time_s", max_model_time_s, 0.0, 1e3, low_open=True, unit=" [s]")
 
 
 ENV_ARGUMENTS: tuple[str, ...] = tuple(

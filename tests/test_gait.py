@@ -104,3 +104,26 @@ def test_gait_settings_round_trip_and_bad_targets_are_refused_by_name():
         make_settings(reward={"kind": "tracking", "targets": {"pose": 1.0}})
     with pytest.raises(ValueError, match="reward target 'height'"):
         make_settings(reward={"kind": "gait", "targets": {"height": float("nan")}})
+
+
+def test_max_model_time_ends_an_episode_held_in_one_model():
+    """``max_model_time_s``: the episode ends (``model_time``) in the first period after which
+    the current model has lasted longer, by the contact clock; off by default."""
+    teacher = controller_from("model:teacher_robust")
+    ends = []
+    for limit in (None, 0.3):
+        env = gym.make("ConstrainedBiped-v0", max_model_time_s=limit)
+        obs, _ = env.reset(seed=3)
+        held = 0
+        for _ in range(1000):
+            obs, _, term, _, info = env.step(teacher(obs))
+            held = held + 1 if info["switches"] == () else 0
+            if term:
+                break
+        ends.append((term, info["termination_reason"], held, info["mode"]))
+    assert ends[0][0] is False  # the teacher walks on without the limit
+    term, reason, held, mode = ends[1]
+    assert term and reason == "model_time" and mode in (1, 2)
+    assert held * 0.005 == pytest.approx(0.3 + 0.005, abs=1e-9)  # 61 periods without a switch
+    with pytest.raises(ValueError, match="max_model_time_s"):
+        gym.make("ConstrainedBiped-v0", max_model_time_s=0.0)

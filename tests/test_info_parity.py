@@ -26,6 +26,7 @@ OPTIONS = [
     {"perturbations": {"push_impulse_ns": -0.3, "push_at_s": 0.1, "obs_noise": (1e-3, 1e-2)}},
     {"reward": {"kind": "gait", "targets": {"speed": 0.8}, "weights": {"step": 2.0}}},
     {"reward": "gait", "action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}, "dt": 0.02},
+    {"reward": "gait", "max_model_time_s": 0.1},
 ]
 
 
