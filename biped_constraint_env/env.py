@@ -104,8 +104,9 @@ class ConstrainedBipedEnv(gym.Env):
     or mid-stride, 1/2 each (for learning both starts). ``start="stride"``: the mid-stride start
     with the swing leg drawn along its swing (its thigh from 0.3 rad behind to 0.4 rad in front
     of straight down, the knee bent 0.05-0.6 rad, the thigh turning forward at 0-2 rad/s, the
-    foot level; ``STRIDE_*`` in :mod:`.starts`): a training start spread over the step's
-    contact phases with no recorded motion. All add
+    foot level), or half of the draws its model-1 counterpart on the flat stance foot (the leg
+    leaning -0.3 to 0.3 rad, turning forward at 0.2-0.6 rad/s; ``STRIDE_*`` in :mod:`.starts`):
+    a training start spread over the step's swing with no recorded motion. All add
     uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` (0.01 rad) to q1..q5; the
     stance toe is at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
     starts from any state in the coordinates of docs/conventions.md (validated: points on or

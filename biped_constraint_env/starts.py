@@ -28,6 +28,11 @@ STRIDE_KNEE_RANGE_RAD = (-0.6, -0.05)
 to nearly straight)."""
 STRIDE_SWING_RATE_RANGE_RAD_S = (0.0, 2.0)
 """Range of the swing thigh's forward turning rate at a stride start [rad/s]."""
+STRIDE_FLAT_LEAN_RANGE_RAD = (-0.3, 0.3)
+"""Range of the stance leg's forward lean at a stride start on the flat foot (model 1) [rad]."""
+STRIDE_FLAT_RATE_RANGE_RAD_S = (-0.6, -0.2)
+"""Range of the stance leg's turning rate about the ankle at a stride start on the flat foot
+(model 1) [rad/s] (< 0: forward; the hip 0.6-1.8 m/s)."""
 STARTS = ("rest", "midstride", "mixed", "stride")
 """Values of the env's ``start`` argument ("mixed": rest or mid-stride, 1/2 each; "stride": the
 mid-stride start with its swing leg drawn along its swing)."""
@@ -88,6 +93,20 @@ def midstride_start(
     return q, np.array([rate, 0.0, 0.0, swing_rate - rate, 0.0, -swing_rate])
 
 
+def flat_foot_stride_start(
+    rate: float, lean: float, swing: float, knee: float, swing_rate: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(q, qd) of a model-1 state in mid-stride, on the flat stance foot.
+
+    The stance leg leans forward by ``lean`` [rad] (knee bent 0.05 rad) and turns about the
+    ankle at ``rate`` [rad/s] (< 0: forward); the swing leg as in :func:`midstride_start`
+    (``swing``, ``knee``, ``swing_rate``).
+    """
+    q, qd = midstride_start(rate, 0.0, lean, swing, knee, swing_rate)
+    qd[0], qd[1] = 0.0, rate  # the foot stays flat; the leg turns about the ankle
+    return q, qd
+
+
 def sample_start(
     rng: np.random.Generator, start: str, posture: np.ndarray, noise_scale: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
@@ -96,26 +115,38 @@ def sample_start(
     "rest": ``posture`` at rest in model 1; "midstride": :func:`midstride_start` with the rate
     and theta0 drawn uniformly from :data:`MIDSTRIDE_RATE_RANGE_RAD_S` and
     :data:`MIDSTRIDE_THETA0_RANGE_RAD`, in model 2; "mixed": one of the two, with probability
-    1/2 each (one more uniform draw first); "stride": the mid-stride start with the swing leg
-    drawn uniformly along its swing (:data:`STRIDE_SWING_RANGE_RAD`,
-    :data:`STRIDE_KNEE_RANGE_RAD`, :data:`STRIDE_SWING_RATE_RANGE_RAD_S`; three more draws).
-    All add uniform noise in [-noise_scale, noise_scale] to q1..q5 [rad].
+    1/2 each (one more uniform draw first); "stride": with probability 1/2 (one more draw
+    first) the mid-stride start with the swing leg drawn uniformly along its swing
+    (:data:`STRIDE_SWING_RANGE_RAD`, :data:`STRIDE_KNEE_RANGE_RAD`,
+    :data:`STRIDE_SWING_RATE_RANGE_RAD_S`; three more draws), else its model-1 counterpart
+    (:func:`flat_foot_stride_start`: the lean and rate drawn from
+    :data:`STRIDE_FLAT_LEAN_RANGE_RAD` and :data:`STRIDE_FLAT_RATE_RANGE_RAD_S` in place of the
+    rate and theta0, then the swing leg's three). All add uniform noise in
+    [-noise_scale, noise_scale] to q1..q5 [rad].
     """
     if start == "mixed":
         start = "rest" if rng.random() < 0.5 else "midstride"
     if start == "rest":
         return sample_initial_q(rng, posture, noise_scale), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
-    rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)
-    theta0 = _uniform(rng, *MIDSTRIDE_THETA0_RANGE_RAD)
+    flat = start == "stride" and rng.random() < 0.5
+    if flat:
+        rate = _uniform(rng, *STRIDE_FLAT_RATE_RANGE_RAD_S)
+        lean = _uniform(rng, *STRIDE_FLAT_LEAN_RANGE_RAD)
+    else:
+        rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)
+        theta0 = _uniform(rng, *MIDSTRIDE_THETA0_RANGE_RAD)
     if start == "stride":
         swing = _uniform(rng, *STRIDE_SWING_RANGE_RAD)
         knee = _uniform(rng, *STRIDE_KNEE_RANGE_RAD)
         swing_rate = _uniform(rng, *STRIDE_SWING_RATE_RANGE_RAD_S)
-        q, qd = midstride_start(rate, theta0, swing=swing, knee=knee, swing_rate=swing_rate)
+        if flat:
+            q, qd = flat_foot_stride_start(rate, lean, swing, knee, swing_rate)
+        else:
+            q, qd = midstride_start(rate, theta0, swing=swing, knee=knee, swing_rate=swing_rate)
     else:
         q, qd = midstride_start(rate, theta0)
     q[1:] += _uniform(rng, -noise_scale, noise_scale, N_LINKS - 1)
-    return q, qd, int(Mode.TOE_PIVOT)
+    return q, qd, int(Mode.FOOT_FLAT if flat else Mode.TOE_PIVOT)
 
 
 def draw_starts(

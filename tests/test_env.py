@@ -312,8 +312,9 @@ def test_midstride_start():
 
 
 def test_stride_start_draws_the_swing_leg_along_its_swing():
-    """``start="stride"``: model 2 as the mid-stride start, the swing thigh's direction, knee and
-    forward rate drawn over their documented ranges, the swing foot level; single = batched."""
+    """``start="stride"``: model 2 as the mid-stride start, or model 1 on the flat foot, the swing
+    thigh's direction, knee and forward rate drawn over their documented ranges, the swing foot
+    level; single = batched."""
     from biped_constraint_env.kinematics import link_angles
     from biped_constraint_env.starts import (
         STRIDE_KNEE_RANGE_RAD,
@@ -324,11 +325,13 @@ def test_stride_start_draws_the_swing_leg_along_its_swing():
     )
 
     env = ConstrainedBipedEnv(start="stride", reset_noise_scale=0.0)
-    swings, knees, rates = [], [], []
+    swings, knees, rates, modes = [], [], [], set()
     for seed in range(200):
         _, info = env.reset(seed=seed)
         st = env.state
-        assert info["mode"] == 2
+        modes.add(info["mode"])
+        if info["mode"] == 1:  # the stance foot flat, the leg turning about the ankle
+            assert st.q[0] == st.qd[0] == 0.0 and st.qd[1] < 0
         check_start_state(env.params, st)
         phi = link_angles(st.q)
         swings.append(phi[3] - 1.5 * np.pi)  # the swing thigh, hip -> knee, from straight down
@@ -336,6 +339,7 @@ def test_stride_start_draws_the_swing_leg_along_its_swing():
         rates.append(np.sum(st.qd[:4]))  # the swing thigh's absolute turning rate
         assert np.sin(phi[5]) == pytest.approx(0.0, abs=1e-12)  # the swing foot level
         assert np.sum(st.qd) == pytest.approx(0.0, abs=1e-12)  # and keeping its direction
+    assert modes == {1, 2}
     for values, (lo, hi) in ((swings, STRIDE_SWING_RANGE_RAD), (knees, STRIDE_KNEE_RANGE_RAD),
                              (rates, STRIDE_SWING_RATE_RANGE_RAD_S)):  # fmt: skip
         assert lo - 1e-12 <= min(values) < lo + 0.2 * (hi - lo)
