@@ -163,6 +163,8 @@ class ConstrainedBipedEnv(gym.Env):
     | reference | None | | the reference walk: "midstride", "rest", "own" (each start its |
     | | | | own kind's recording) or an npz path (None: the start's own; "own" if mixed) |
     | rsi | 0.0 | | fraction of resets at reference states (reference-state starts) |
+    | restarts | 0.0 | | fraction of resets at states this env visited just after a |
+    | | | | completed step (its own pool; :mod:`.restarts`) |
     | action | "torque" | | "torque", "pd" (PD targets in [-1, 1]^5, below) or a dict: |
     | | | | {"kind": "pd", "around": "fixed" or "reference", "range": 1.0 [rad], |
     | | | | "pose": Fig. 2 q1..q5 [rad], "offset": zeros [rad], "gain_scale": 1.0 |
@@ -234,7 +236,7 @@ class ConstrainedBipedEnv(gym.Env):
       env share one core (:mod:`.core`), so their ``info`` keys and values are equal
       (the PD torque and pushes appear in the reset's ``info`` too, zero).
       Added: ``reward="gait"`` and the reward's ``targets``; ``start="stride"``;
-      ``max_model_time_s``.
+      ``max_model_time_s``; ``restarts``.
 
     Example:
         >>> import gymnasium as gym

@@ -75,12 +75,13 @@ class PhysicsSettings:
 
 @dataclass(frozen=True)
 class StartSettings:
-    """The start distribution: kind, rest posture, reset noise and reference-state fraction."""
+    """The start distribution: kind, rest posture, reset noise, rsi and restart fractions."""
 
     start: str
     posture: tuple[float, ...]
     reset_noise_scale: float
     rsi: float
+    restarts: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -314,6 +315,7 @@ def make_settings(
     reward: str | dict | None = None,
     reference: str | None = None,
     rsi: float | None = None,
+    restarts: float = 0.0,
     action: str | dict | None = None,
     reference_obs: bool = False,
     perturbations: dict[str, Any] | None = None,
@@ -344,7 +346,11 @@ def make_settings(
         task=task,
         physics=PhysicsSettings(params, t["preset"], options, dt),
         start=StartSettings(
-            start_kind, tuple(q0.tolist()), noise, check_real("rsi", t["rsi"], 0.0, 1.0)
+            start_kind,
+            tuple(q0.tolist()),
+            noise,
+            check_real("rsi", t["rsi"], 0.0, 1.0),
+            check_real("restarts", restarts, 0.0, 1.0),
         ),  # fmt: skip
         action=_action_settings(action, task_action, torque_limit_nm, out_of_range, dt),
         reward=reward_settings(_with_kind(reward, TASKS[task].get("reward", "env")), weights),

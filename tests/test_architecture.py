@@ -1,9 +1,10 @@
 """One direction of dependency: jit (how the core is compiled) and validation (argument
 checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> the simulator
 (state -> options -> stepper -> advance -> simulator, its Python API) -> the env's parts
-(tasks, actions, starts, rewards, gait, observation, reference, perturbations) -> settings (all the
-env's arguments, validated once) -> tracking -> period (the compiled control period) -> core
-(N rows around it: starts, reasons, rewards, info) -> env (its one-row case) -> vector_env.
+(tasks, actions, starts, restarts, rewards, gait, observation, reference, perturbations) ->
+settings (all the env's arguments, validated once) -> tracking -> period (the compiled control
+period) -> core (N rows around it: starts, reasons, rewards, info) -> env (its one-row case) ->
+vector_env.
 Each module may import only modules of lower or equal rank."""
 
 import ast
@@ -35,6 +36,7 @@ LAYERS = [
     "tasks",
     "actions",
     "starts",
+    "restarts",
     "rewards",
     "gait",
     "clock",
