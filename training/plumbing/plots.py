@@ -157,18 +157,25 @@ def selection_curves(runs: Sequence[Path], labels: Sequence[str], path: Path) ->
     """Plot the periodic selection evaluations of several runs (their ``eval.csv``).
 
     The mean and the fewest completed steps of each evaluation against env steps, one colour
-    per run.
+    per run, or per group of runs labelled "GROUP, ..." (a line style per run of a group).
     """
     import csv
 
     plt = _mpl()
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), sharey=True)
-    for k, (run, label) in enumerate(zip(runs, labels, strict=True)):
+    groups = [label.split(",")[0] for label in labels]
+    order = list(dict.fromkeys(groups))
+    seen: dict[str, int] = {}
+    for run, label, group in zip(runs, labels, groups, strict=True):
         with open(Path(run) / "eval.csv") as fh:
             ev = list(csv.DictReader(fh))
         x = [int(r["env_steps"]) / 1e6 for r in ev]
+        style = ("-", "--", ":", "-.")[seen.get(group, 0) % 4]
+        seen[group] = seen.get(group, 0) + 1
+        colour = plt.get_cmap("tab20" if len(order) > 10 else "tab10")(order.index(group))
         for ax, key in zip(axes, ("steps_mean", "steps_min"), strict=True):
-            ax.plot(x, [float(r[key]) for r in ev], "o-", ms=3, color=f"C{k}", label=label)
+            ax.plot(x, [float(r[key]) for r in ev], "o", ls=style, ms=3, color=colour,
+                    label=label)  # fmt: skip
     axes[0].set_ylabel(
         "completed steps (selection episodes:\n6000 periods, 30 s at 5 ms, 120 s at 20 ms)",
         fontsize=8,
