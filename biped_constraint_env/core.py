@@ -93,7 +93,6 @@ class EnvCore:
         self.restarts = RestartPool(s.start.restarts) if s.start.restarts > 0 else None
         self._count_steps = self._track or self.gait is not None or self.restarts is not None
         self._max_model_t = s.max_model_time_s
-        self._held = np.zeros(n, bool)  # rows ended by max_model_time_s this period
         self._pd = a.pd
         self._pushes = s.perturbations.push_impulse_ns is not None
         self._noisy = s.perturbations.obs_noise is not None
@@ -190,10 +189,10 @@ class EnvCore:
         else:
             terminated = (sim.status > 0) | (buf.fell != 0)
         if self._max_model_t is not None:  # early termination: a contact phase held too long
-            self._held = self.clock.model_time_s() > self._max_model_t + 1e-9
+            held = self.clock.model_time_s() > self._max_model_t + 1e-9
             if skip is not None:
-                self._held[skip] = False
-            terminated |= self._held
+                held[skip] = False
+            terminated |= held
         if self.restarts is not None:  # the states just after completed steps
             self.restarts.record(sim, np.flatnonzero((sim.ist[:, ST_STEPS] > steps0) & ~terminated))
         if self._track:
