@@ -10,8 +10,13 @@ of the task (:data:`~.rewards.REWARD_KINDS` ``"gait"``):
   weight * exp(-kernel * min(0, swing ankle's forward speed - target)^2), the swing foot
   carried forward; while the swing foot is down (models 3 and 4), the weight;
 * ``cadence`` (periodic, the contact clock): weight * exp(-kernel * max(0, time in the current
-  model - target)^2), no contact phase held longer than the target;
+  model - target)^2), no contact phase held longer than the target (one target for all models,
+  or one per model: ``targets={"cadence": [0.6, 0.25, 0.15, 0.1]}``);
 * ``step``: weight per completed walking step.
+
+With ``gated`` the speed, height and swing terms are multiplied by the cadence kernel
+(exp(-kernel * max(0, ...)^2), in [0, 1]): a contact phase held past its target earns nothing,
+as Siekmann et al. (2021) gate their task terms by a periodic clock.
 
 As with the tracking reward, every term is positive, so ending early never pays, and a period
 ended by an event earns only its steps. The single and the batched env compute it here, once.
@@ -40,7 +45,10 @@ class GaitReward:
         self.dt = float(dt)
         self._w = {t: reward.weight(t) for t in GAIT_TERMS}
         self._k = {t: reward.kernel(t) for t in GAIT_TERMS if t != "step"}
-        self._target = {t: reward.target(t) for t in GAIT_TERMS if t != "step"}
+        self._target = {t: reward.target(t) for t in GAIT_TERMS if t not in ("step", "cadence")}
+        self._cadence = np.zeros(5)  # indexed by the model, 1-4
+        self._cadence[1:] = reward.target("cadence")
+        self._gated = reward.gated
         self._swing_vy = np.zeros(n)
 
     def swing_ankle_vy(self, chs, q, qd, ist) -> np.ndarray:
@@ -63,8 +71,11 @@ class GaitReward:
         short = np.minimum(swing_vy - tg["swing"], 0.0)
         free = np.isin(modes, SWING_MODELS)
         out[:, 2] = np.where(free, w["swing"] * np.exp(-k["swing"] * short**2), w["swing"])
-        over = np.maximum(model_time_s - tg["cadence"], 0.0)
-        out[:, 3] = w["cadence"] * np.exp(-k["cadence"] * over**2)
+        over = np.maximum(model_time_s - self._cadence[modes], 0.0)
+        on_time = np.exp(-k["cadence"] * over**2)
+        out[:, 3] = w["cadence"] * on_time
+        if self._gated:
+            out[:, :3] *= on_time[:, None]
         out[~alive, :4] = 0.0
         out[:, 4] = w["step"] * steps
         out[:, 5] = out[:, :5].sum(axis=1)

@@ -44,6 +44,8 @@ class RewardTerm:
     kernel: float | None = None
     doc: str = ""
     target: float | None = None
+    per_model: bool = False
+    """The target may be one value per model (1-4) instead of one for all."""
 
 
 REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
@@ -83,7 +85,9 @@ REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
             0.2,
             10.0,
             target=0.7,
-            doc="kernel of max(0, time in the current model - target [s])^2",
+            doc="kernel of max(0, time in the current model - target [s])^2; the target one "
+            "value or one per model (1-4)",
+            per_model=True,
         ),
         RewardTerm("step", 1.0, doc="weight per completed walking step"),
     ),
@@ -93,7 +97,10 @@ reference earns 1) and each halves its term at an error of about 0.37 rad (one a
 3.7 rad/s, 59 mm and 0.37 m/s; a step takes about 170 periods of 5 ms. The gait kernels' weights
 sum to 1 too, with no recorded motion: its targets are round numbers of the task (a 1.1 m/s walk
 at the hip height of a straight-legged stance, the swing foot moving forward, no contact phase
-held beyond 0.7 s), overridable (``reward={"kind": "gait", "targets": {"speed": 0.8}}``)."""
+held beyond 0.7 s), overridable (``reward={"kind": "gait", "targets": {"speed": 0.8}}``).
+``reward={"kind": "gait", "gated": True}`` multiplies the speed, height and swing terms by the
+cadence kernel (in [0, 1]): a contact phase held past its target earns nothing, as a periodic
+clock gates the task terms of Siekmann et al. (2021)."""
 
 REWARD_TERMS = tuple(f"reward_{t.name}" for t in REWARD_KINDS["env"])
 """``info`` keys of the walking reward's terms (the compiled reward's columns, in order)."""
@@ -111,7 +118,9 @@ class RewardSettings:
     kind: str
     weights: tuple[float, ...]
     kernels: tuple[float | None, ...]
-    targets: tuple[float | None, ...] = ()
+    targets: tuple[float | tuple[float, ...] | None, ...] = ()
+    gated: bool = False
+    """The gait reward: its task terms multiplied by the cadence kernel."""
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -131,29 +140,35 @@ class RewardSettings:
         """The kernel scale of ``term`` (a kernel term)."""
         return self.kernels[self.terms.index(term)]
 
-    def target(self, term: str) -> float:
-        """The target of ``term`` (a term with one)."""
+    def target(self, term: str) -> float | tuple[float, ...]:
+        """The target of ``term`` (a term with one; one per model where it was given so)."""
         return self.targets[self.terms.index(term)]
 
     def as_dict(self) -> dict[str, Any]:
-        """``{"kind", "weights", "kernels"[, "targets"]}`` as the ``reward`` kwarg takes it."""
+        """``{"kind", "weights", "kernels"[, "targets", "gated"]}`` as ``reward`` takes it."""
         kernels = {t: k for t, k in zip(self.terms, self.kernels, strict=True) if k is not None}
         out = {"kind": self.kind, "weights": dict(zip(self.terms, self.weights, strict=True)),
                "kernels": kernels}  # fmt: skip
-        targets = {t: v for t, v in zip(self.terms, self.targets, strict=True) if v is not None}
+        targets = {t: (list(v) if isinstance(v, tuple) else v)
+                   for t, v in zip(self.terms, self.targets, strict=True)
+                   if v is not None}  # fmt: skip
         if targets:
             out["targets"] = targets
+        if self.gated:
+            out["gated"] = True
         return out
 
 
 def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
-    """The ``reward`` kwarg (a kind's name or ``{"kind", "weights", "kernels", "targets"}``).
+    """The ``reward`` kwarg: a kind's name or ``{"kind", "weights", "kernels", ...}``.
 
+    The dict's other keys: ``"targets"`` (the gait reward's) and ``"gated"`` (the gait
+    reward's task terms gated by the cadence kernel).
     ``env_weights``: the :data:`ENV_WEIGHT_KWARGS` given (None: the registry's); they set the
     ``"env"`` kind's weights and are refused with another kind (they would do nothing).
     """
     spec = {"kind": reward} if isinstance(reward, str) else reward
-    check_mapping("reward", spec, ("kind", "weights", "kernels", "targets"))
+    check_mapping("reward", spec, ("kind", "weights", "kernels", "targets", "gated"))
     kind = check_choice("reward kind", spec.get("kind", "env"), sorted(REWARD_KINDS))
     terms = REWARD_KINDS[kind]
     names = [t.name for t in terms]
@@ -176,13 +191,33 @@ def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
                                    low_open=True)  # fmt: skip
     targets = {t.name: t.target for t in terms}
     target_names = [t.name for t in terms if t.target is not None]
+    per_model = {t.name for t in terms if t.per_model}
     for name, value in check_mapping("reward targets", spec.get("targets", {}),
                                      target_names).items():  # fmt: skip
-        targets[name] = check_real(f"reward target {name!r}", value, -REWARD_WEIGHT_MAX,
-                                   REWARD_WEIGHT_MAX)  # fmt: skip
+        targets[name] = _target(name, value, name in per_model)
+    gated = spec.get("gated", False)
+    if gated is not False and kind != "gait":
+        raise ValueError(f"reward 'gated' is a setting of the 'gait' reward, not {kind!r}'s")
+    if not isinstance(gated, bool):
+        raise ValueError(f"reward 'gated' must be a bool, got {gated!r}")
     return RewardSettings(kind, tuple(weights[n] for n in names),
                           tuple(kernels[n] for n in names),
-                          tuple(targets[n] for n in names))  # fmt: skip
+                          tuple(targets[n] for n in names), gated)  # fmt: skip
+
+
+def _target(name: str, value: Any, per_model: bool) -> float | tuple[float, ...]:
+    """A checked target: a number, or for a per-model term one number per model (1-4)."""
+    if per_model and isinstance(value, list | tuple):
+        if len(value) != N_MODEL_TARGETS:
+            raise ValueError(f"reward target {name!r} takes one number or {N_MODEL_TARGETS} "
+                             f"(one per model), got {len(value)}")  # fmt: skip
+        return tuple(check_real(f"reward target {name!r}", v, -REWARD_WEIGHT_MAX,
+                                REWARD_WEIGHT_MAX) for v in value)  # fmt: skip
+    return check_real(f"reward target {name!r}", value, -REWARD_WEIGHT_MAX, REWARD_WEIGHT_MAX)
+
+
+N_MODEL_TARGETS = 4
+"""Values of a per-model target (models 1-4)."""
 
 
 REWARD_WEIGHT_MAX = 1e6

@@ -57,6 +57,37 @@ def test_terms_are_their_weights_at_the_targets_and_fall_as_documented():
     assert _terms(_reward(speed=0.5), 0.5 * 0.02, 0, 0, 3, 0)[0] == TERMS["speed"].weight
 
 
+def test_per_model_cadence_targets_and_the_gate():
+    """A cadence target per model (1-4) is the target of the current model; ``gated`` multiplies
+    the speed, height and swing terms by the cadence kernel, and changes nothing on time."""
+    per = (0.6, 0.25, 0.15, 0.1)
+    g = GaitReward(reward_settings({"kind": "gait", "targets": {"cadence": list(per)}}, {}),
+                   0.02, 1)  # fmt: skip
+    gated = GaitReward(reward_settings({"kind": "gait", "targets": {"cadence": list(per)},
+                                        "gated": True}, {}), 0.02, 1)  # fmt: skip
+    k, w = TERMS["cadence"].kernel, TERMS["cadence"].weight
+    for mode, target in zip((1, 2, 3, 4), per, strict=True):
+        args = (0.02, 2.9, 0.7, mode, target + 0.2)
+        plain, gate = _terms(g, *args), _terms(gated, *args)
+        on_time = np.exp(-k * 0.2**2)
+        assert plain[3] == pytest.approx(w * on_time)
+        np.testing.assert_allclose(gate[:3], plain[:3] * on_time, rtol=1e-12)
+        assert gate[3] == plain[3] and gate[5] == pytest.approx(gate[:5].sum())
+        in_time = (0.02, 2.9, 0.7, mode, target - 0.01)
+        np.testing.assert_array_equal(_terms(gated, *in_time), _terms(g, *in_time))
+    s = make_settings(reward={"kind": "gait", "targets": {"cadence": list(per)}, "gated": True})
+    assert make_settings(reward=s.reward.as_dict()).reward == s.reward
+    assert s.reward.target("cadence") == per and s.reward.gated
+    with pytest.raises(ValueError, match="one number or 4"):
+        make_settings(reward={"kind": "gait", "targets": {"cadence": [0.6, 0.2]}})
+    with pytest.raises(ValueError, match="reward target 'speed'"):
+        make_settings(reward={"kind": "gait", "targets": {"speed": [1.0, 1, 1, 1]}})
+    with pytest.raises(ValueError, match="'gated' is a setting of the 'gait' reward"):
+        make_settings(reward={"kind": "tracking", "gated": True})
+    with pytest.raises(ValueError, match="'gated' must be a bool"):
+        make_settings(reward={"kind": "gait", "gated": 1})
+
+
 def test_the_swing_ankle_speed_is_the_finite_difference_of_its_position():
     env = gym.make("ConstrainedBiped-v0", reward="gait")
     obs, _ = env.reset(seed=1)

@@ -27,6 +27,11 @@ OPTIONS = [
     {"reward": {"kind": "gait", "targets": {"speed": 0.8}, "weights": {"step": 2.0}}},
     {"reward": "gait", "action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}, "dt": 0.02},
     {"reward": "gait", "max_model_time_s": 0.1},
+    {
+        "reward": {"kind": "gait", "gated": True, "targets": {"cadence": [0.3, 0.1, 0.1, 0.1]}},
+        "action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]},
+        "dt": 0.02,
+    },
 ]
 
 

@@ -23,6 +23,11 @@ class PPOConfig:
     # flags: --env KEY=VALUE ... (TOML values) on top of the file's table
     train_env: dict = field(default_factory=dict)  # [train_env] table: what the training env
     # changes on top of [env] (reference-state starts, pushes, randomised models...)
+    curriculum_env: dict = field(default_factory=dict)  # [curriculum_env] table: what the
+    # training env changes on top of [env] and [train_env] in the first curriculum_steps env
+    # steps (e.g. strict = false: lenient contact checks); the rest of the training, and every
+    # evaluation, use the env without it
+    curriculum_steps: int = 0  # env steps of training with [curriculum_env] (0: none)
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
@@ -109,13 +114,21 @@ class PPOConfig:
         from biped_constraint_env.reference import OWN_REFERENCE, REFERENCES
         from biped_constraint_env.settings import make_settings
 
-        for table in ("env", "train_env"):  # shipped references only: a config names no file
+        if bool(self.curriculum_env) != (self.curriculum_steps > 0):
+            raise ValueError("--curriculum-steps and [curriculum_env] go together: "
+                             "give both or neither")  # fmt: skip
+        # shipped references only: a config names no file
+        for table in ("env", "train_env", "curriculum_env"):
             ref = getattr(self, table).get("reference")
             if ref is not None and ref not in (*REFERENCES, OWN_REFERENCE):
                 raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES} "
                                  f"or {OWN_REFERENCE!r}, "
                                  f"got {ref!r}")  # fmt: skip
-        for name, kwargs in (("env", self.env_kwargs()), ("train_env", self.train_env_kwargs())):
+        for name, kwargs in (
+            ("env", self.env_kwargs()),
+            ("train_env", self.train_env_kwargs()),
+            ("curriculum_env", self.train_env_kwargs(curriculum=True)),
+        ):
             try:
                 make_settings(**kwargs)
             except (ValueError, TypeError) as e:
@@ -153,9 +166,12 @@ class PPOConfig:
         """
         return {**self.env, "rsi": 0.0}
 
-    def train_env_kwargs(self) -> dict:
-        """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top."""
-        return {**self.env, **self.train_env}
+    def train_env_kwargs(self, curriculum: bool = False) -> dict:
+        """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top.
+
+        With ``curriculum``, ``[curriculum_env]`` on top of both (the first env steps' env).
+        """
+        return {**self.env, **self.train_env, **(self.curriculum_env if curriculum else {})}
 
     def settings(self):
         """The validated settings of the env the policy runs in (:mod:`biped_constraint_env`)."""
@@ -251,6 +267,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
     ("bc_ankle_weight", 0.0, 1e6), ("log_std_joints", -20.0, 5.0), ("action_std_nm", 0.0, 150.0),
     ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
+    ("curriculum_steps", 0, _BIG),
 )  # fmt: skip
 
 

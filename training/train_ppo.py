@@ -407,6 +407,8 @@ def write_settings(run: Path, cfg: PPOConfig) -> None:
 
     data = {"env": cfg.settings().as_dict(),
             "train_env": make_settings(**cfg.train_env_kwargs()).as_dict()}  # fmt: skip
+    if cfg.curriculum_steps > 0:
+        data["curriculum_env"] = make_settings(**cfg.train_env_kwargs(curriculum=True)).as_dict()
     (run / "env_settings.json").write_text(json.dumps(data, indent=1) + "\n")
 
 
@@ -490,21 +492,37 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     )
 
 
-def training_env(cfg: PPOConfig, seed: int, monitor_file: Path | None = None, env_threads=None):
+def training_env(
+    cfg: PPOConfig,
+    seed: int,
+    monitor_file: Path | None = None,
+    env_threads=None,
+    curriculum: bool = False,
+):
     """The training env of a config: (VecMonitor of the SB3 VecEnv, VecNormalize over it).
 
-    The config's training env options (with ``rsi``), its time limit and action map;
-    ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy normalises its
-    observations itself (fixed statistics), so VecNormalize normalises only the returns.
+    The config's training env options (with ``rsi``; with ``curriculum`` its
+    ``[curriculum_env]`` too), its time limit and action map; ``env_threads`` overrides
+    ``cfg.env_threads``. With a teacher the policy normalises its observations itself (fixed
+    statistics), so VecNormalize normalises only the returns.
     """
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    venv = _monitored_env(cfg, seed, monitor_file, env_threads, curriculum)
+    vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
+    return venv, vecnorm
+
+
+def _monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads, curriculum: bool):
+    """The config's SB3 VecEnv under a VecMonitor (:func:`training_env`'s inner env)."""
+    from stable_baselines3.common.vec_env import VecMonitor
 
     from training.sb3_vec import make_sb3_vec_env
 
     venv = make_sb3_vec_env(
         cfg.n_envs,
         seed,
-        cfg.train_env_kwargs(),
+        cfg.train_env_kwargs(curriculum),
         cfg.vec,
         cfg.env_id,
         cfg.action_map(),
@@ -516,8 +534,41 @@ def training_env(cfg: PPOConfig, seed: int, monitor_file: Path | None = None, en
         None if monitor_file is None else str(monitor_file),
         info_keywords=("steps_completed", "hip_y", "termination_reason"),
     )
-    vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
-    return venv, vecnorm
+    return venv
+
+
+def _monitor_file(run: Path, start: int) -> Path:
+    """A new monitor file of a training session, named by the env step it starts from."""
+    monitor, k = run / f"{start}.monitor.csv", 1
+    while monitor.exists():
+        monitor, k = run / f"{start}.{k}.monitor.csv", k + 1
+    return monitor
+
+
+def _curriculum(cfg: PPOConfig, run: Path, vecnorm, seed: int):
+    """A callback: after ``cfg.curriculum_steps`` env steps the training env drops its curriculum.
+
+    A new env without ``[curriculum_env]``, under the same VecNormalize statistics; its
+    episodes start afresh after the update of the last curriculum rollout.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Curriculum(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            if vecnorm.venv.curriculum and self.num_timesteps >= cfg.curriculum_steps:
+                vecnorm.venv.close()
+                vecnorm.venv = _monitored_env(cfg, seed, _monitor_file(run, self.num_timesteps),
+                                              None, curriculum=False)  # fmt: skip
+                vecnorm.venv.curriculum = False
+                self.model._last_obs = vecnorm.reset()
+                self.model._last_episode_starts = np.ones(cfg.n_envs, bool)
+                print(f"[curriculum] {self.num_timesteps} env steps: the training env without "
+                      f"{cfg.curriculum_env} from now on", flush=True)  # fmt: skip
+
+    return Curriculum()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -545,15 +596,14 @@ def _main(cfg: PPOConfig, run: Path) -> int:
     resuming = available(run, "checkpoint")
     start = load_state(find_snapshot(run, "checkpoint"))["num_timesteps"] if resuming else 0
     # one monitor file per session, named by the env step it starts from (never overwritten)
-    monitor = run / f"{start}.monitor.csv"
-    k = 1
-    while monitor.exists():
-        monitor, k = run / f"{start}.{k}.monitor.csv", k + 1
-    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, monitor)
+    in_curriculum = start < cfg.curriculum_steps
+    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, _monitor_file(run, start),
+                                 curriculum=in_curriculum)  # fmt: skip
+    venv.curriculum = in_curriculum
     try:
         return _train(cfg, run, venv, vecnorm, start, resuming)
     finally:
-        venv.close()
+        vecnorm.venv.close()  # the curriculum may have replaced the first
 
 
 def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool) -> int:
@@ -618,6 +668,7 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
             callback=[
                 callback,
                 _critic_warmup(cfg, anchor),
+                _curriculum(cfg, run, vecnorm, TRAIN_SEED_OFFSET + cfg.seed),
                 update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
                 *([_progress_bar(cfg)] if cfg.progress else []),
             ],
