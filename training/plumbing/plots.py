@@ -132,8 +132,9 @@ def learning_curve(run: Path, path: Path) -> None:
     def smooth(y):
         return np.convolve(y, np.ones(window) / window, mode="valid")
 
-    axes[0].plot(x[window - 1 :], smooth(steps), lw=1, label="training episodes (moving mean)")
-    axes[1].plot(x[window - 1 :], smooth(rets), lw=1, label="training episodes (moving mean)")
+    if len(mon):  # no training episode ended yet (a run of 0 env steps): no curve
+        axes[0].plot(x[window - 1 :], smooth(steps), lw=1, label="training episodes (moving mean)")
+        axes[1].plot(x[window - 1 :], smooth(rets), lw=1, label="training episodes (moving mean)")
     if (run / "eval.csv").exists():
         with open(run / "eval.csv") as fh:
             ev = list(csv.DictReader(fh))
