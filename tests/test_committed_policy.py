@@ -134,3 +134,28 @@ def test_committed_50hz_policies_walk_at_20_ms_with_what_they_say_in_the_loop(na
         kw = {**cfg.env_kwargs(), "start": start}
         (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id, episode_s=30)
         assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", (start, ep)
+
+
+def test_committed_level2_policy_walks_with_no_recorded_motion():
+    """policies/ppo_gait_50hz: the network alone sets torques every 20 ms, trained by PPO from a
+    random network with the gait reward and the env's own starts; no option of its run-time or
+    training env reads a recorded walk. One held-out 30 s mid-stride episode walks."""
+    import torch
+
+    from biped_constraint_env.settings import make_settings
+    from training.policy_io import available, load_policy, policy_actor
+    from training.rollouts import run_episodes
+
+    torch.set_num_threads(1)
+    path = POLICY.parent / "ppo_gait_50hz"
+    policy, norm, cfg, _ = load_policy(path, "best")
+    assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
+    run, train = cfg.settings(), make_settings(**cfg.train_env_kwargs())
+    for s in (run, train):
+        assert s.reward.kind == "gait" and s.action.kind == "torque" and not s.needs_reference
+        assert s.dt == 0.02 and s.observation.phase_obs and s.physics.options.strict
+        assert s.physics.preset == "default"
+    assert train.start.start == "stride" and run.start.start == "midstride"
+    (ep,) = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), [0], cfg.env_id,
+                         episode_s=30)  # fmt: skip
+    assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep

@@ -155,10 +155,11 @@ def learning_curve(run: Path, path: Path) -> None:
 
 
 def selection_curves(runs: Sequence[Path], labels: Sequence[str], path: Path) -> None:
-    """Plot the periodic selection evaluations of several runs (their ``eval.csv``).
+    """Plot the periodic selection evaluations of several runs (each ``eval.csv``).
 
-    The mean and the fewest completed steps of each evaluation against env steps, one colour
-    per run, or per group of runs labelled "GROUP, ..." (a line style per run of a group).
+    ``runs``: run directories or the CSV files themselves. The mean and the fewest completed
+    steps of each evaluation against env steps, one colour per run, or per group of runs
+    labelled "GROUP, ..." (a line style per run of a group).
     """
     import csv
 
@@ -168,7 +169,7 @@ def selection_curves(runs: Sequence[Path], labels: Sequence[str], path: Path) ->
     order = list(dict.fromkeys(groups))
     seen: dict[str, int] = {}
     for run, label, group in zip(runs, labels, groups, strict=True):
-        with open(Path(run) / "eval.csv") as fh:
+        with open(Path(run) if Path(run).suffix == ".csv" else Path(run) / "eval.csv") as fh:
             ev = list(csv.DictReader(fh))
         x = [int(r["env_steps"]) / 1e6 for r in ev]
         style = ("-", "--", ":", "-.")[seen.get(group, 0) % 4]
