@@ -545,24 +545,29 @@ def _monitor_file(run: Path, start: int) -> Path:
     return monitor
 
 
-def _curriculum(cfg: PPOConfig, run: Path, vecnorm, seed: int):
+def _curriculum(cfg: PPOConfig, run: Path, vecnorm, seed: int, active: bool):
     """A callback: after ``cfg.curriculum_steps`` env steps the training env drops its curriculum.
 
-    A new env without ``[curriculum_env]``, under the same VecNormalize statistics; its
-    episodes start afresh after the update of the last curriculum rollout.
+    ``active``: whether the training env has ``[curriculum_env]`` now. At the switch, a new env
+    without it, under the same VecNormalize statistics; its episodes start afresh after the
+    update of the last curriculum rollout.
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
     class Curriculum(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.active = active
+
         def _on_step(self) -> bool:
             return True
 
         def _on_rollout_end(self) -> None:
-            if vecnorm.venv.curriculum and self.num_timesteps >= cfg.curriculum_steps:
+            if self.active and self.num_timesteps >= cfg.curriculum_steps:
                 vecnorm.venv.close()
                 vecnorm.venv = _monitored_env(cfg, seed, _monitor_file(run, self.num_timesteps),
                                               None, curriculum=False)  # fmt: skip
-                vecnorm.venv.curriculum = False
+                self.active = False
                 self.model._last_obs = vecnorm.reset()
                 self.model._last_episode_starts = np.ones(cfg.n_envs, bool)
                 print(f"[curriculum] {self.num_timesteps} env steps: the training env without "
@@ -599,14 +604,15 @@ def _main(cfg: PPOConfig, run: Path) -> int:
     in_curriculum = start < cfg.curriculum_steps
     venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, _monitor_file(run, start),
                                  curriculum=in_curriculum)  # fmt: skip
-    venv.curriculum = in_curriculum
     try:
-        return _train(cfg, run, venv, vecnorm, start, resuming)
+        return _train(cfg, run, venv, vecnorm, start, resuming, in_curriculum)
     finally:
         vecnorm.venv.close()  # the curriculum may have replaced the first
 
 
-def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool) -> int:
+def _train(
+    cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool, in_curriculum: bool
+) -> int:
     """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env."""
     import torch
 
@@ -668,7 +674,7 @@ def _train(cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool)
             callback=[
                 callback,
                 _critic_warmup(cfg, anchor),
-                _curriculum(cfg, run, vecnorm, TRAIN_SEED_OFFSET + cfg.seed),
+                _curriculum(cfg, run, vecnorm, TRAIN_SEED_OFFSET + cfg.seed, in_curriculum),
                 update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
                 *([_progress_bar(cfg)] if cfg.progress else []),
             ],
