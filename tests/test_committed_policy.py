@@ -159,3 +159,25 @@ def test_committed_level2_policy_walks_with_no_recorded_motion():
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), [0], cfg.env_id,
                          episode_s=30)  # fmt: skip
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
+
+
+def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
+    """policies/ppo_alone_rest_50hz (the moonshot): the network alone sets torques every 20 ms,
+    the clock but no reference in its input, trained by PPO from a random network from both
+    starts. One held-out 30 s episode from the paper's rest posture and one mid-stride walk."""
+    import torch
+
+    from training.policy_io import available, load_policy, policy_actor
+    from training.rollouts import run_episodes
+
+    torch.set_num_threads(1)
+    path = POLICY.parent / "ppo_alone_rest_50hz"
+    policy, norm, cfg, _ = load_policy(path, "best")
+    assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
+    s = cfg.settings()
+    assert s.action.kind == "torque" and s.dt == 0.02 and s.physics.preset == "default"
+    assert s.observation.phase_obs and not s.observation.reference_obs and s.start.rsi == 0.0
+    for start in ("rest", "midstride"):
+        kw = {**cfg.env_kwargs(), "start": start}
+        (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id, episode_s=30)
+        assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", (start, ep)
