@@ -235,8 +235,9 @@ class ConstrainedBipedEnv(gym.Env):
       offsets per model (``action["offset"]`` of 4 x 5). The single and the batched
       env share one core (:mod:`.core`), so their ``info`` keys and values are equal
       (the PD torque and pushes appear in the reset's ``info`` too, zero).
-      Added: ``reward="gait"`` and the reward's ``targets``; ``start="stride"``;
-      ``max_model_time_s``; ``restarts``.
+      Added: ``reward="gait"`` and the reward's ``targets`` (the cadence target one
+      value or one per model) and ``gated``; ``start="stride"``; ``max_model_time_s``;
+      ``restarts``.
 
     Example:
         >>> import gymnasium as gym

@@ -97,6 +97,8 @@ MODE_TABLE = MappingProxyType(
     }
 )
 """The four models (paper section 3)."""
+N_MODELS = len(MODE_TABLE)
+"""The paper's models (1-4): settings given one value per model have this many."""
 
 
 class EventCode(IntEnum):

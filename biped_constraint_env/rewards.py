@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .jit import njit_noalloc
+from .modes import N_MODELS
 from .validation import check_choice, check_mapping, check_real
 
 TERMINATION_NON_FINITE = "non_finite"
@@ -208,16 +209,12 @@ def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
 def _target(name: str, value: Any, per_model: bool) -> float | tuple[float, ...]:
     """A checked target: a number, or for a per-model term one number per model (1-4)."""
     if per_model and isinstance(value, list | tuple):
-        if len(value) != N_MODEL_TARGETS:
-            raise ValueError(f"reward target {name!r} takes one number or {N_MODEL_TARGETS} "
+        if len(value) != N_MODELS:
+            raise ValueError(f"reward target {name!r} takes one number or {N_MODELS} "
                              f"(one per model), got {len(value)}")  # fmt: skip
         return tuple(check_real(f"reward target {name!r}", v, -REWARD_WEIGHT_MAX,
                                 REWARD_WEIGHT_MAX) for v in value)  # fmt: skip
     return check_real(f"reward target {name!r}", value, -REWARD_WEIGHT_MAX, REWARD_WEIGHT_MAX)
-
-
-N_MODEL_TARGETS = 4
-"""Values of a per-model target (models 1-4)."""
 
 
 REWARD_WEIGHT_MAX = 1e6

@@ -32,6 +32,7 @@ from .actions import (
     check_pd_dt,
 )
 from .model import N_ACTUATED, BipedParams, paper_biped
+from .modes import N_MODELS
 from .options import SimOptions
 from .perturbations import PerturbationSettings, perturbation_settings
 from .reference import OWN_REFERENCE, REFERENCES
@@ -47,8 +48,6 @@ from .validation import (
     check_real,
 )
 
-N_MODELS = 4
-"""The paper's models (1-4): ``action["offset"]`` may give one row of offsets per model."""
 PD_RANGE_RAD = 1.0
 """Default half-range of the PD targets around their base [rad] (``action["range"]``)."""
 PD_RANGE_MAX_RAD = 3.0
