@@ -23,7 +23,6 @@ evaluations per simulated second (counted in the solver).
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
@@ -40,6 +39,8 @@ from biped_constraint_env.model import paper_biped
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimOptions
 from biped_constraint_env.state import MAX_EVENTS, N_FST
 from biped_constraint_env.stepper import S_Q1, S_QD1, nb_integrate_w, nb_make_scratch
+from training.plumbing.common import CliParser, command
+from training.plumbing.outputs import command_output, save_figure, write_file
 
 RESULTS = Path(__file__).parent / "results"
 HYBRID_COLS = [
@@ -486,8 +487,7 @@ def plot(rows_a, rows_b, rows_c, stab, path_a, path_b, path_c, path_s):
         axes[0].set_title(title)
         axes[1].legend(fontsize=7)
         fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        save_figure(fig, path, dpi=110)
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for method, marker in (("euler", "o"), ("rk2", "s"), ("rk4", "^"), ("rk4_limex", "v")):
         sel = [s for s in stab if s["method"] == method]
@@ -502,8 +502,7 @@ def plot(rows_a, rows_b, rows_c, stab, path_a, path_b, path_c, path_s):
     ax.set_title("stability (semi-implicit, LIMEX: stable at every step tried)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path_s, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path_s, dpi=110)
 
 
 RULE_ANGLE_RAD = 1e-3
@@ -576,8 +575,9 @@ def _md(rows, cols):
     return head + "".join("| " + " | ".join(fmt(r[c]) for c in cols) + " |\n" for r in rows)
 
 
+@command("accuracy")
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer step sizes and postures")
     ap.add_argument(
         "--out",
@@ -587,8 +587,15 @@ def main(argv=None) -> int:
         f"{RESULTS} updates the committed results)",
     )
     args = ap.parse_args(argv)
-    args.out = args.out or Path("runs/accuracy_quick" if args.quick else "runs/accuracy")
-    args.out.mkdir(parents=True, exist_ok=True)
+    out = args.out or Path("runs/accuracy_quick" if args.quick else "runs/accuracy")
+    with command_output(out, "accuracy") as co:
+        _run(args.quick, Path(co.dir().where()))
+    print(f"wrote {out}")
+    return 0
+
+
+def _run(quick: bool, out: Path) -> None:
+    """The study, its figures and tables written into ``out`` (a staging directory)."""
     params = paper_biped()
     from training.plumbing.common import progress
 
@@ -596,18 +603,18 @@ def main(argv=None) -> int:
     for name in progress(["a", "b", "c", "stability", "mujoco"], 5, "accuracy study"):
         if name == "a":
             results["scene_a"], results["scene_a_reference_self_error_rad"] = scene_a(
-                params, args.quick
+                params, quick
             )
         elif name == "b":
-            rows, sw, res = scene_b(params, args.quick)
+            rows, sw, res = scene_b(params, quick)
             results["scene_b"], results["scene_b_reference_switches"] = rows, sw
             results["scene_b_reference_residual_m"] = res
         elif name == "c":
-            rows, sw, res = scene_c(params, args.quick)
+            rows, sw, res = scene_c(params, quick)
             results["scene_c"], results["scene_c_reference_switches"] = rows, sw
             results["scene_c_reference_residual_m"] = res
         elif name == "stability":
-            results["stability"] = stability_map(params, args.quick)
+            results["stability"] = stability_map(params, quick)
         else:
             results["mujoco"] = mujoco_validation(params)
     plot(
@@ -615,10 +622,10 @@ def main(argv=None) -> int:
         results["scene_b"],
         results["scene_c"],
         results["stability"],
-        args.out / "work_precision_a.png",
-        args.out / "work_precision_b.png",
-        args.out / "work_precision_c.png",
-        args.out / "stability_map.png",
+        out / "work_precision_a.png",
+        out / "work_precision_b.png",
+        out / "work_precision_c.png",
+        out / "stability_map.png",
     )
     meeting = meeting_rule(results["scene_b"], results["scene_c"])
     results["rule"] = rule_choice(meeting)
@@ -627,7 +634,7 @@ def main(argv=None) -> int:
     results["default"]["meets_rule"] = bool(default)
     if default:
         results["default"].update(default[0])
-    (args.out / "accuracy.json").write_text(json.dumps(results, indent=1) + "\n")
+    write_file(out / "accuracy.json", json.dumps(results, indent=1) + "\n")
     md = (
         "## scene (a)\n"
         + _md(
@@ -670,14 +677,13 @@ def main(argv=None) -> int:
             ["posture", "method", "lambda_max_per_s", "h_stable_ms", "h_theory_ms"],
         )
     )
-    (args.out / "accuracy_tables.md").write_text(md)
+    write_file(out / "accuracy_tables.md", md)
     print(md)
     print("scene (b) reference switches:", results["scene_b_reference_switches"])
     print("scene (c) reference switches:", results["scene_c_reference_switches"])
     print("reference self-error (a), h vs 2h:", results["scene_a_reference_self_error_rad"])
     print("MuJoCo:", json.dumps(results["mujoco"], indent=1))
     print("the default physics in the rule:", json.dumps(results["default"]))
-    return 0
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 from pathlib import Path
@@ -32,6 +31,8 @@ from biped_constraint_env import dynamics as dyn
 from biped_constraint_env import kinematics as kin
 from biped_constraint_env.hybrid import nb_impact, nb_solve_mode
 from biped_constraint_env.model import paper_biped
+from training.plumbing.common import CliParser, command
+from training.plumbing.outputs import command_output, save_figure, write_file
 
 RESULTS = Path(__file__).parent / "results"
 HEEL = -0.25  # swing heel offset from the swing ankle [m]
@@ -131,21 +132,29 @@ def grazing():
     return out
 
 
+@command("failure_modes")
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument(
         "--out",
         type=Path,
         default=Path("runs/failure_modes"),
         help=f"output folder (default: runs/failure_modes; {RESULTS} updates the committed ones)",
     )
-    out_dir = ap.parse_args(argv).out
+    out = ap.parse_args(argv).out
+    with command_output(out, "failure_modes") as co:
+        _run(Path(co.dir().where()))
+    print(f"wrote {out}")
+    return 0
+
+
+def _run(out_dir: Path) -> None:
+    """The study, its figures and JSON written into ``out_dir`` (a staging directory)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out_dir.mkdir(parents=True, exist_ok=True)
     rows, knee_rows, k_star = conditioning()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     ax = axes[0]
@@ -166,8 +175,7 @@ def main(argv=None) -> int:
     ax.invert_xaxis()
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out_dir / "conditioning.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_dir / "conditioning.png", dpi=110)
     v = np.linspace(-0.01, 0.01, 401)
     fig, ax = plt.subplots(figsize=(6, 3.5))
     ax.plot(v * 1e3, np.sign(v), label="paper: v/|v| (discontinuous)")
@@ -181,8 +189,7 @@ def main(argv=None) -> int:
     ax.set_ylabel("friction direction (times K f_n)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out_dir / "friction_law.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_dir / "friction_law.png", dpi=110)
     graz = grazing()
     out = {
         "painleve_K_star": k_star,
@@ -190,10 +197,8 @@ def main(argv=None) -> int:
         "inverse_condition_at_K_0.5": float(np.interp(0.5, rows[:, 0], rows[:, 2])),
         "grazing": graz,
     }
-    (out_dir / "failure_modes.json").write_text(json.dumps(out, indent=1) + "\n")
+    write_file(out_dir / "failure_modes.json", json.dumps(out, indent=1) + "\n")
     print(json.dumps(out, indent=1))
-    print(f"wrote {out_dir}")
-    return 0
 
 
 if __name__ == "__main__":

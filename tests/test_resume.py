@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from training import train_ppo
-from training.plumbing.safe_files import write_manifest
+from training.policy_io import write_manifest
 from training.policy_io import STATE_FILE, find_snapshot, load_state
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -336,7 +336,7 @@ def test_sweep_without_ray_says_what_to_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
     with pytest.raises(SystemExit) as e:
         sweep.main(["--config", "training/configs/ppo_scratch.toml"])
-    assert ".[distributed]" in str(e.value.code)  # the one line printed on exit
+    assert ".[distributed]" in str(e.value)  # the one line printed on exit
 
 
 def test_teacher_gains_are_found_from_any_directory(monkeypatch, tmp_path):

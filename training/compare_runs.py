@@ -24,8 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
-from training.plumbing.common import CliParser, int_in, refusals, write_text_atomic
-from training.policy_io import available, find_snapshot, load_policy, load_state, policy_actor
+from training.plumbing.common import CliParser, command, int_in, refusals
+from training.plumbing.outputs import write_file
+from training.policy_io import (
+    SNAPSHOTS,
+    available,
+    find_snapshot,
+    json_text,
+    load_policy,
+    load_state,
+    policy_actor,
+)
 from training.rollouts import run_episodes, summarize
 from training.stats import EPISODE_S
 
@@ -91,12 +100,13 @@ def scaffold_row(config: Path, seeds: list[int]) -> dict:
     return row
 
 
+@command("compare_runs")
 def main(argv=None) -> int:
     """Evaluate every run's snapshots; print the markdown table; write the JSON."""
     ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="*", type=Path)
     ap.add_argument("--scaffold", type=Path, default=None, help="a config: zero-output row")
-    ap.add_argument("--which", nargs="+", default=["best", "final"])
+    ap.add_argument("--which", nargs="+", default=["best", "final"], choices=sorted(SNAPSHOTS))
     ap.add_argument("--episodes", type=int_in(1, 100_000), default=10)
     ap.add_argument("--seed", type=int_in(0, 2**31 - 1), default=0, help="episode i: seed + i")
     ap.add_argument("--out", type=Path, default=None, help="write the rows as JSON here")
@@ -148,7 +158,6 @@ def _compare(a: argparse.Namespace) -> int:
     if a.curves is not None and a.runs:
         from training.plumbing.plots import selection_curves
 
-        a.curves.parent.mkdir(parents=True, exist_ok=True)
         labels = []
         for run in a.runs:
             cfg = read_config(run)
@@ -157,9 +166,7 @@ def _compare(a: argparse.Namespace) -> int:
         selection_curves(a.runs, labels, a.curves)
         print(f"selection curves: {a.curves}")
     if a.out is not None:
-        write_text_atomic(
-            a.out, json.dumps({"seeds": seeds, "rows": rows}, indent=1, default=float)
-        )
+        write_file(a.out, json_text({"seeds": seeds, "rows": rows}))
     return 0
 
 

@@ -35,11 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
-from training.plumbing.common import CliParser, float_in, int_in
-from training.plumbing.safe_files import UntrustedFileError, atomic_output
+from training.plumbing.common import CliParser, command, float_in, int_in
+from training.plumbing.outputs import command_output, write_file
+from training.plumbing.safe_files import UntrustedFileError
 from training.policy_io import (
     SNAPSHOTS,
     available,
+    json_text,
     load_policy,
     policy_actor,
     policy_batch_actor,
@@ -239,6 +241,7 @@ def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> lis
     return rows + open_loop_baselines()
 
 
+@command("evaluate", "nothing was written (the --out folder is as it was)")
 def main(argv: Sequence[str] | None = None) -> int:
     """Evaluate and write the outputs."""
     ap = CliParser(description=__doc__.splitlines()[0])
@@ -282,8 +285,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error("give a run directory or --controller, not both")
     if args.controller and args.compare:
         ap.error("--compare needs a run directory (its teacher, imitation and stresses)")
-    if args.out is not None and (args.out / "config.toml").exists():
-        ap.error(f"--out {args.out} is a run or policy directory; give a folder of its own")
     t0 = time.time()
     print(f"loading {args.run_dir or args.controller} and the simulator", flush=True)
     import torch
@@ -307,10 +308,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     name = args.run_dir.resolve().name if args.run_dir else args.controller.replace(":", "_")
     out = args.out or Path("runs") / "evaluate" / f"{name}_{args.which}_{start}"
     try:
-        with atomic_output(out) as tmp:
-            _evaluate(args, loop, start, tmp, t0, out)
+        with command_output(out, "evaluate") as co:
+            _evaluate(args, loop, start, Path(co.dir().where()), t0, out)
     except UntrustedFileError as e:
-        ap.error(str(e))
+        ap.error(f"--out: {e}")
     print(f"wrote {out}")
     return 0
 
@@ -352,8 +353,8 @@ def _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir)
     )
     robustness.figure(rob, out_dir / "figures" / "robustness.png", title)
     summary = {"seeds": seeds, "in_the_loop": in_the_loop, "rows": robustness.compact(rob)}
-    text = json.dumps(summary, default=float).replace('{"group"', '\n{"group"')
-    (out_dir / "robustness.json").write_text(text + "\n")
+    text = json_text(summary, indent=None).strip().replace('{"group"', '\n{"group"')
+    write_file(out_dir / "robustness.json", text + "\n")
     print("\n" + robustness.markdown(rob), flush=True)
     return rob
 
@@ -401,7 +402,7 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
         "seeds": seeds,
         "results": rows,
     }
-    (out_dir / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+    write_file(out_dir / "evaluation.json", json_text(summary))
     print(
         f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "
         f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, {start} start, strict physics; "

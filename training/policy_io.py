@@ -24,9 +24,9 @@ leaves a complete snapshot to resume from (:func:`find_snapshot`).
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
-import shutil
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -34,15 +34,22 @@ from typing import Any
 
 import numpy as np
 
+from training.plumbing.common import CliParser, command
+from training.plumbing.outputs import OutDir
 from training.plumbing.safe_files import (
+    MANIFEST_FILE,
+    MAX_WEIGHTS_BYTES,
+    Snapshot,
     UntrustedFileError,
     inside,
+    load_safetensors,
+    read_bytes,
     read_json_object,
     read_npz,
+    read_snapshot,
     read_toml,
-    safetensors_shapes,
+    safetensors_header,
     verify_manifest,
-    write_manifest,
 )
 
 POLICY_FILE = "policy.safetensors"
@@ -65,38 +72,55 @@ SB3_PICKLE_WARNING = (
 
 
 # ------------------------------------------------------------------------- snapshot files
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+MAX_TIMESTEPS = 10**12
+"""Largest env-step counter a snapshot may hold (a year at 30k env steps/s is 10^12)."""
 
 
 @contextlib.contextmanager
 def atomic_dir(where: Path) -> Iterator[Path]:
-    """Write a snapshot directory atomically: yields a temporary directory to fill.
+    """Write a snapshot directory atomically: yields a fresh directory (a path into it) to fill.
 
-    On leaving, the files are flushed, the current ``where`` (if any) becomes
-    ``where.prev`` (replacing the older one) and the temporary directory becomes ``where``.
-    An exception leaves ``where`` and ``where.prev`` as they were.
+    ``where``'s parent is opened once (``O_NOFOLLOW``) and everything happens through that
+    descriptor: the temporary ``NAME.tmp`` is made anew (``mkdir``: nothing planted in it),
+    the yielded path resolves through its own descriptor, the files are flushed and
+    hashed into the manifest, the current ``where`` becomes ``NAME.prev`` and the temporary
+    directory ``where`` (renames that replace links, never follow them). An exception leaves
+    ``where`` and ``where.prev`` as they were.
     """
     where = Path(where)
-    tmp = where.with_name(where.name + TMP_SUFFIX)
-    prev = where.with_name(where.name + PREVIOUS_SUFFIX)
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    yield tmp
-    for f in tmp.iterdir():
-        with open(f, "rb") as fh:
-            os.fsync(fh.fileno())
-    write_manifest(tmp)  # last: sizes and hashes of every file
-    _fsync_dir(tmp)
-    if where.exists():
-        shutil.rmtree(prev, ignore_errors=True)
-        where.rename(prev)
-    tmp.rename(where)
-    _fsync_dir(where.parent)
+    name = where.name
+    tmp, prev = name + TMP_SUFFIX, name + PREVIOUS_SUFFIX
+    with OutDir.open(where.parent) as parent:
+        parent.remove(tmp)
+        os.mkdir(tmp, 0o755, dir_fd=parent.fd)
+        with parent.subdir(tmp, create=False) as d:
+            yield Path(d.where())
+            _write_manifest(d)
+            d.fsync()
+        if parent.kind(name) is not None:
+            parent.remove(prev)
+            parent.replace(name, prev)
+        parent.replace(tmp, name)
+        parent.fsync()
+
+
+def _write_manifest(d: OutDir) -> None:
+    """Record every file of ``d`` (size, SHA-256), each read back through ``d``, written last."""
+    entries = {}
+    for name in d.names():
+        if name == MANIFEST_FILE:
+            continue
+        if d.kind(name) != "file":
+            raise UntrustedFileError(f"{d.path / name}: a snapshot holds files only")
+        data = read_bytes(Path(d.where(name)), MAX_WEIGHTS_BYTES)
+        entries[name] = {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+    d.write(MANIFEST_FILE, json.dumps(entries, indent=1, sort_keys=True) + "\n")
+
+
+def write_manifest(where: Path) -> None:
+    """Record every file of the directory ``where`` in its manifest (tests build snapshots)."""
+    with OutDir.open(where, create=False) as d:
+        _write_manifest(d)
 
 
 def is_complete(where: Path) -> bool:
@@ -129,6 +153,21 @@ def find_snapshot(run: Path, which: str) -> Path:
     )
 
 
+def open_snapshot(run: Path, which: str) -> Snapshot:
+    """Snapshot ``which`` of a run, its files read once and checked (:func:`read_snapshot`)."""
+    for _ in range(3):  # replaced between the check and the read: look again
+        where = find_snapshot(run, which)
+        try:
+            return read_snapshot(where)
+        except (FileNotFoundError, UntrustedFileError):
+            continue
+    return read_snapshot(find_snapshot(run, which))
+
+
+def _snap(where: Path | Snapshot) -> Snapshot:
+    return where if isinstance(where, Snapshot) else read_snapshot(where)
+
+
 def available(run: Path, which: str) -> bool:
     """Whether a run has a complete snapshot ``which`` (or its kept previous one)."""
     where = Path(run) / SNAPSHOTS[which]
@@ -136,7 +175,7 @@ def available(run: Path, which: str) -> bool:
 
 
 def _has_sb3_zip(run: Path) -> bool:
-    return any(Path(run).glob("**/model.zip"))
+    return any(p.name == "model.zip" for p in Path(run).glob("*/model.zip"))
 
 
 def save_snapshot(
@@ -149,9 +188,10 @@ def save_snapshot(
 ) -> None:
     """Write a snapshot of an SB3 ``policy`` (and its VecNormalize) atomically into ``where``.
 
-    ``state``: plain data (numbers, strings, lists, dicts) saved as JSON. ``optimizer``: also
-    save the policy optimizer's state (checkpoints that a resume continues from). ``arrays``:
-    further npz files of the snapshot, by file name (e.g. training data).
+    ``state``: plain data (numbers, strings, lists, dicts) saved as standard JSON (a number
+    that is not finite is written as null). ``optimizer``: also save the policy optimizer's
+    state (checkpoints that a resume continues from). ``arrays``: further npz files of the
+    snapshot, by file name (e.g. training data).
     """
     from safetensors.torch import save_file, save_model
 
@@ -164,38 +204,94 @@ def save_snapshot(
             save_normalizer(vecnorm, tmp / NORMALIZER_FILE)
         for name, content in (arrays or {}).items():
             np.savez(tmp / name, **content)
-        (tmp / STATE_FILE).write_text(json.dumps(state, indent=1) + "\n")
+        (tmp / STATE_FILE).write_text(json_text(state))
 
 
-def load_state(where: Path) -> dict[str, Any]:
-    """The snapshot's ``state.json``, its counters checked (``num_timesteps``: an int >= 0)."""
-    path = Path(where) / STATE_FILE
-    state = read_json_object(path)
-    n = state.get("num_timesteps", 0)
-    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
-        raise UntrustedFileError(f"{path}: num_timesteps must be an integer >= 0, got {n!r}")
+def json_text(data: Any, indent: int | None = 1) -> str:
+    """Standard JSON text (NaN and infinities become null), ending in a newline."""
+    return json.dumps(finite_or_null(data), indent=indent, allow_nan=False, default=float) + "\n"
+
+
+def finite_or_null(x: Any) -> Any:
+    """``x`` with every float that is not finite replaced by None (JSON null)."""
+    if isinstance(x, float | np.floating):
+        return float(x) if np.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: finite_or_null(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [finite_or_null(v) for v in x]
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.ndarray):
+        return finite_or_null(x.tolist())
+    return x
+
+
+def _counter(path: Path, state: dict, key: str, hi: int = MAX_TIMESTEPS) -> int:
+    n = state.get(key, 0)
+    if type(n) is not int or not 0 <= n <= hi:
+        raise UntrustedFileError(f"{path}: {key} must be an integer in [0, {hi}], got {n!r}")
+    return n
+
+
+def _score(path: Path, state: dict, key: str) -> float:
+    """A score field: a finite number, or null / absent (no score yet: -inf)."""
+    v = state.get(key)
+    if v is None:
+        return -np.inf
+    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+        raise UntrustedFileError(f"{path}: {key} must be a finite number or null, got {v!r}")
+    if abs(v) > 1e12:
+        raise UntrustedFileError(f"{path}: {key} = {v!r} is out of range")
+    return float(v)
+
+
+def load_state(where: Path | Snapshot) -> dict[str, Any]:
+    """The snapshot's ``state.json``, its counters checked.
+
+    ``num_timesteps``: an integer in [0, :data:`MAX_TIMESTEPS`]; ``best`` and ``score``:
+    finite numbers (null or absent: none yet, read as -inf); ``wall_s``: finite, >= 0.
+    """
+    if isinstance(where, Snapshot):
+        path, state = where.name(STATE_FILE), where.json(STATE_FILE)
+    else:
+        path = Path(where) / STATE_FILE
+        state = read_json_object(path)
+    state["num_timesteps"] = _counter(path, state, "num_timesteps")
     for key in ("best", "score"):
-        if key in state and not isinstance(state[key], int | float):
-            raise UntrustedFileError(f"{path}: {key} must be a number, got {state[key]!r}")
+        if key in state:
+            state[key] = _score(path, state, key)
+    wall = state.get("wall_s", 0.0)
+    if isinstance(wall, bool) or not isinstance(wall, int | float) or not 0 <= wall < 1e9:
+        raise UntrustedFileError(f"{path}: wall_s must be a number of seconds >= 0, got {wall!r}")
     return state
 
 
-def load_weights(policy, where: Path) -> None:
+def load_weights(policy, where: Path | Snapshot) -> None:
     """Load the snapshot's weights into ``policy``: the same names and shapes, all finite."""
     import torch
-    from safetensors.torch import load_model
 
-    path = Path(where) / POLICY_FILE
-    shapes = safetensors_shapes(path)
-    want = {k: tuple(v.shape) for k, v in policy.state_dict().items()}
+    snap = _snap(where)
+    path = snap.name(POLICY_FILE)
+    if POLICY_FILE not in snap:
+        raise UntrustedFileError(f"{path}: missing")
+    shapes, _ = safetensors_header(path, data=snap.files[POLICY_FILE])
+    model_sd = policy.state_dict()
+    want = {k: tuple(v.shape) for k, v in model_sd.items()}
     wrong = sorted(set(shapes) - set(want)) + [
         f"{k}: {shapes[k]}, the config's {want[k]}" for k in shapes if k in want
         and shapes[k] != want[k]
     ]  # fmt: skip
     if wrong:
         raise UntrustedFileError(f"{path}: does not match the config's network ({wrong[:3]})")
-    try:  # names the file lacks must be aliases of shared tensors: strict load checks that
-        load_model(policy, str(path), strict=True)
+    tensors = load_safetensors(path, snap.files[POLICY_FILE])
+    # names the file lacks must be aliases of tensors it has (shared modules)
+    loaded_ptrs = {model_sd[k].data_ptr() for k in tensors}
+    missing = [k for k in want if k not in tensors and model_sd[k].data_ptr() not in loaded_ptrs]
+    if missing:
+        raise UntrustedFileError(f"{path}: does not match the config's network (lacks {missing[:3]})")
+    try:
+        policy.load_state_dict(tensors, strict=False)
     except RuntimeError as e:
         raise UntrustedFileError(f"{path}: does not match the config's network ({e})") from None
     bad = [k for k, v in policy.state_dict().items() if v.is_floating_point()
@@ -204,15 +300,18 @@ def load_weights(policy, where: Path) -> None:
         raise UntrustedFileError(f"{path}: {bad[0]} holds NaN or inf")
 
 
-def check_weights(cfg, where: Path) -> None:
+def check_weights(cfg, where: Path | Snapshot) -> None:
     """Check the snapshot's weights against the config before any network is built.
 
     From the safetensors header alone: the hidden layers equal ``cfg.net_arch``, the input
     is the env's observation and the output its five actions. A config that asks for a
     larger network than its weights hold is refused here, not allocated.
     """
-    path = Path(where) / POLICY_FILE
-    shapes = safetensors_shapes(path)
+    snap = _snap(where)
+    path = snap.name(POLICY_FILE)
+    if POLICY_FILE not in snap:
+        raise UntrustedFileError(f"{path}: missing")
+    shapes, _ = safetensors_header(path, data=snap.files[POLICY_FILE])
     prefix = "features_extractor." if cfg.teacher else ""
     for net in ("policy_net", "value_net"):
         layers = []
@@ -233,16 +332,65 @@ def check_weights(cfg, where: Path) -> None:
         raise UntrustedFileError(f"{path}: no in-network normaliser ({prefix}mean)")
 
 
-def load_optimizer(policy, where: Path) -> None:
-    """Load the snapshot's optimizer state into ``policy.optimizer``."""
-    from safetensors import safe_open
+def load_optimizer(policy, where: Path | Snapshot) -> None:
+    """Load the snapshot's optimizer state into ``policy.optimizer``, checked against it.
 
-    path = Path(where) / OPTIMIZER_FILE
-    safetensors_shapes(path)  # header and size checked before any tensor is read
-    with safe_open(str(path), framework="pt") as fh:
-        meta = fh.metadata()
-        tensors = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 (safe_open API)
-    policy.optimizer.load_state_dict(_unflatten_optimizer(tensors, meta))
+    The saved hyperparameters must equal the optimizer's own (they come from the run's
+    config), except the learning rate (a schedule's: finite, in (0, 1]); every moment
+    tensor has its parameter's shape, finite values and a non-negative second moment; the
+    step count is finite, in [0, :data:`MAX_TIMESTEPS`].
+    """
+    import torch
+
+    snap = _snap(where)
+    path = snap.name(OPTIMIZER_FILE)
+    if OPTIMIZER_FILE not in snap:
+        raise UntrustedFileError(f"{path}: missing")
+    _, meta = safetensors_header(path, data=snap.files[OPTIMIZER_FILE])
+    tensors = load_safetensors(path, snap.files[OPTIMIZER_FILE])
+    try:
+        groups = json.loads(meta["param_groups"])
+        scalars = json.loads(meta["scalars"])
+        if not isinstance(groups, list) or not isinstance(scalars, dict):
+            raise TypeError
+    except (KeyError, ValueError, TypeError, RecursionError):
+        raise UntrustedFileError(f"{path}: no optimizer metadata of this package's kind") from None
+    opt = policy.optimizer
+    own = opt.state_dict()["param_groups"]
+    params = [p for g in opt.param_groups for p in g["params"]]
+    if len(groups) != len(own):
+        raise UntrustedFileError(f"{path}: {len(groups)} parameter groups, the optimizer has "
+                                 f"{len(own)}")  # fmt: skip
+    for g, o in zip(groups, own, strict=True):
+        if not isinstance(g, dict) or set(g) != set(o):
+            raise UntrustedFileError(f"{path}: parameter group keys differ from the optimizer's")
+        for k, v in g.items():
+            if k == "lr":
+                if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v <= 1:
+                    raise UntrustedFileError(f"{path}: lr must be in (0, 1], got {v!r}")
+            elif json.dumps(v) != json.dumps(o[k]):
+                raise UntrustedFileError(f"{path}: {k} = {v!r}, the run's optimizer has {o[k]!r}")
+    if scalars:
+        raise UntrustedFileError(f"{path}: unexpected scalar state {sorted(scalars)[:3]}")
+    want = {}
+    for pid, p in enumerate(params):
+        want[f"state.{pid}.exp_avg"] = tuple(p.shape)
+        want[f"state.{pid}.exp_avg_sq"] = tuple(p.shape)
+        want[f"state.{pid}.step"] = ()
+    pids = {k.split(".")[1] for k in tensors}
+    if set(tensors) - set(want) or any(
+        f"state.{pid}.{k}" not in tensors for pid in pids for k in ("exp_avg", "exp_avg_sq", "step")
+    ):
+        raise UntrustedFileError(f"{path}: its tensors are not this optimizer's state")
+    for k, t in tensors.items():
+        if tuple(t.shape) != want[k] or not torch.isfinite(t).all():
+            raise UntrustedFileError(f"{path}: {k} has the wrong shape or is not finite")
+        if k.endswith("exp_avg_sq") and (t < 0).any():
+            raise UntrustedFileError(f"{path}: {k} holds a negative second moment")
+        if k.endswith("step") and not 0 <= float(t) <= MAX_TIMESTEPS:
+            raise UntrustedFileError(f"{path}: {k} = {float(t)} is out of range")
+    opt.load_state_dict(_unflatten_optimizer(tensors, {"param_groups": json.dumps(groups),
+                                                       "scalars": "{}"}))  # fmt: skip
 
 
 def _flatten_optimizer(sd: dict) -> tuple[dict, dict[str, str]]:
@@ -295,17 +443,21 @@ def save_normalizer(vecnorm, path: Path) -> None:
     )
 
 
-def read_normalizer(path: Path, obs_dim: int | None = None) -> dict[str, Any]:
+def read_normalizer(
+    path: Path, obs_dim: int | None = None, data: bytes | None = None
+) -> dict[str, Any]:
     """The npz written by :func:`save_normalizer`, each array's header checked first.
 
     ``obs_dim``: the observation statistics must have that length (or none, when the run
-    did not normalise observations). Never unpickles.
+    did not normalise observations). ``data``: the file's bytes, already read. Every
+    statistic is range-checked: variances and counts >= 0, epsilon and the clips > 0,
+    gamma in (0, 1]. Never unpickles.
     """
     d = None if obs_dim is None else obs_dim
     spec = {k: ((None,), "f") for k in ("obs_mean", "obs_var")}
     spec.update({k: ((), "f") for k in ("obs_count", "ret_mean", "ret_var", "ret_count")})
     spec.update({k: ((), "f") for k in _NORM_SETTINGS})
-    z = read_npz(path, spec, max_bytes=1 << 20)
+    z = read_npz(path, spec, max_bytes=1 << 20, data=data)
     out = {k: z[k] for k in _NORM_ARRAYS}
     out.update({k: float(z[k]) for k in _NORM_SETTINGS})
     out["norm_obs"], out["norm_reward"] = bool(out["norm_obs"]), bool(out["norm_reward"])
@@ -315,19 +467,26 @@ def read_normalizer(path: Path, obs_dim: int | None = None) -> dict[str, Any]:
             f"{path}: observation statistics of length {n}/{len(out['obs_var'])}, the config's "
             f"observation has {d}"
         )
-    if out["norm_obs"] and (np.any(out["obs_var"] < 0) or out["epsilon"] <= 0):
-        raise UntrustedFileError(f"{path}: a negative variance or epsilon <= 0")
-    if out["norm_obs"] and out["clip_obs"] <= 0:
-        raise UntrustedFileError(f"{path}: clip_obs must be > 0")
+    negative = [k for k in ("obs_var", "obs_count", "ret_var", "ret_count")
+                if np.any(out[k] < 0)]  # fmt: skip
+    if negative:
+        raise UntrustedFileError(f"{path}: {negative[0]} is negative")
+    if not (out["epsilon"] > 0 and out["clip_obs"] > 0 and out["clip_reward"] > 0):
+        raise UntrustedFileError(f"{path}: epsilon, clip_obs and clip_reward must be > 0")
+    if not 0 < out["gamma"] <= 1:
+        raise UntrustedFileError(f"{path}: gamma must be in (0, 1]")
     return out
 
 
-def restore_normalizer(vecnorm, where: Path) -> None:
+def restore_normalizer(vecnorm, where: Path | Snapshot) -> None:
     """Set a new VecNormalize's statistics from a snapshot (to continue training)."""
     n = vecnorm.observation_space.shape[0]
-    d = read_normalizer(Path(where) / NORMALIZER_FILE, n)
+    snap = _snap(where)
+    if NORMALIZER_FILE not in snap:
+        raise UntrustedFileError(f"{snap.name(NORMALIZER_FILE)}: missing")
+    d = read_normalizer(snap.name(NORMALIZER_FILE), n, snap.files[NORMALIZER_FILE])
     if d["norm_obs"] != vecnorm.norm_obs:
-        raise ValueError(f"{where}: norm_obs {d['norm_obs']} differs from the run's")
+        raise UntrustedFileError(f"{snap.path}: norm_obs {d['norm_obs']} differs from the run's")
     if d["norm_obs"]:
         vecnorm.obs_rms.mean, vecnorm.obs_rms.var = d["obs_mean"], d["obs_var"]
         vecnorm.obs_rms.count = float(d["obs_count"])
@@ -411,19 +570,22 @@ def load_policy(run: Path, which: str = "final"):
     the normaliser when the run normalised observations. Nothing is unpickled or imported.
     """
     cfg = read_config(run)
-    where = find_snapshot(run, which)
-    inside(Path(run), where)
-    state = load_state(where)
-    check_weights(cfg, where)
+    snap = open_snapshot(run, which)  # every file read once: no mixing with a replacement
+    inside(Path(run), snap.path)
+    state = load_state(snap)
+    check_weights(cfg, snap)
     policy = build_policy(cfg)
-    load_weights(policy, where)
+    load_weights(policy, snap)
     policy.set_training_mode(False)
-    norm_path = where / NORMALIZER_FILE
+    norm_path = snap.name(NORMALIZER_FILE)
+    raw = snap.files.get(NORMALIZER_FILE)
     if cfg.teacher:  # the network normalises its own input; VecNormalize kept returns only
-        d = read_normalizer(norm_path, cfg.obs_dim()) if norm_path.exists() else None
+        d = read_normalizer(norm_path, cfg.obs_dim(), raw) if raw is not None else None
         norm = ObsNormalizer(d if d and d["norm_obs"] else None)
+    elif raw is None:
+        raise UntrustedFileError(f"{norm_path}: missing")
     else:
-        d = read_normalizer(norm_path, cfg.obs_dim())
+        d = read_normalizer(norm_path, cfg.obs_dim(), raw)
         if not d["norm_obs"]:
             raise UntrustedFileError(f"{norm_path}: holds no observation statistics")
         norm = ObsNormalizer(d)
@@ -455,13 +617,13 @@ def policy_batch_actor(policy, normalizer: ObsNormalizer, cfg):
 def import_sb3_zip(
     zip_path: Path,
     vecnormalize_pkl: Path | None,
-    out: Path,
+    out: OutDir,
     state: dict | None = None,
     env: dict | None = None,
 ) -> None:
     """Convert a Stable-Baselines3 ``model.zip`` (+ ``vecnormalize.pkl``) to a run directory.
 
-    ``out`` receives ``config.toml`` (the network's architecture, read from the model, and
+    ``out`` (an open output directory) receives ``config.toml`` (the network's architecture, read from the model, and
     ``env``: the keyword arguments of the env it was trained in, ``[env]``) and the snapshot
     ``final/``, so that ``python -m training.evaluate OUT`` runs it. The model's actions in
     [-1, 1] are taken as ``make_sb3_vec_env`` maps them (torques / 150 N m; PD targets as they
@@ -504,19 +666,19 @@ def import_sb3_zip(
     if vecnorm is None or not vecnorm.norm_obs:
         raise ValueError(f"{zip_path}: give its --vecnormalize (observation statistics)")
     cfg.validate()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    d = Path(out.where())
     save_snapshot(
-        out / "final", pol, {"num_timesteps": int(model.num_timesteps), **(state or {})}, vecnorm
+        d / "final", pol, {"num_timesteps": int(model.num_timesteps), **(state or {})}, vecnorm
     )
-    (out / "config.toml").write_text(to_toml(cfg))
+    out.write("config.toml", to_toml(cfg))
 
 
+@command("policy_io")
 def main(argv: list[str] | None = None) -> int:
     """``python -m training.policy_io import-sb3 MODEL.zip [--vecnormalize PKL] --out DIR``."""
-    import argparse
+    from training.plumbing.outputs import command_output
 
-    ap = argparse.ArgumentParser(description="Convert an SB3 model.zip to a pickle-free snapshot")
+    ap = CliParser(description="Convert an SB3 model.zip to a pickle-free snapshot")
     sub = ap.add_subparsers(dest="cmd", required=True)
     imp = sub.add_parser("import-sb3", help="model.zip + vecnormalize.pkl -> a run directory")
     imp.add_argument("model_zip", type=Path)
@@ -532,8 +694,18 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from training.plumbing.common import parse_assignment
 
-    env = dict(parse_assignment(item, "--env") for item in a.env)
-    import_sb3_zip(a.model_zip, a.vecnormalize, a.out, env=env)
+    try:
+        env = dict(parse_assignment(item, "--env") for item in a.env)
+    except ValueError as e:
+        ap.error(str(e))
+    for path in (a.model_zip, a.vecnormalize):
+        if not path.is_file():
+            ap.error(f"{path}: no such file")
+    with command_output(a.out, "import-sb3") as co:
+        try:
+            import_sb3_zip(a.model_zip, a.vecnormalize, co.dir(), env=env)
+        except ValueError as e:
+            ap.error(str(e))
     print(f"wrote {a.out}")
     return 0
 

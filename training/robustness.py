@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from training.plumbing.outputs import save_figure
 
 PUSH_IMPULSES_NS = (0.25, 0.5, 1.0, 1.5)
 """Push sizes [N s], each forward and backward. The hip's velocity changes by about 1.25 m/s
@@ -116,8 +117,7 @@ def figure(rows: list[dict], path: Path, title: str) -> None:
     b.set_title("reset noise, model error, sensor noise")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def markdown(rows: list[dict]) -> str:

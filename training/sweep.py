@@ -18,6 +18,7 @@ results table is printed and written to ``results.csv`` in the sweep's directory
 
 from __future__ import annotations
 
+import io
 import itertools
 import os
 import sys
@@ -25,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from training.plumbing.common import CliParser, int_in
+from training.plumbing.common import CliParser, command, int_in
+from training.plumbing.outputs import command_output, write_file
 from training.plumbing.distributed import connect, shutdown
 
 METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
@@ -115,6 +117,7 @@ def trial(config: dict) -> None:
     tune.report(metrics, checkpoint=tune.Checkpoint.from_directory(run))
 
 
+@command("sweep")
 def main(argv: list[str] | None = None) -> int:
     """Run the sweep and print its results table."""
     ap = CliParser(description=__doc__.splitlines()[0])
@@ -147,10 +150,14 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         ap.error(
             "Ray Tune is not installed: pip install -e '.[distributed]' (in an environment of "
-            "its own: Ray RLlib pins an older Gymnasium; README, Distributed)"
+            "its own: Ray RLlib pins an older Gymnasium; README, Distributed training)"
         )
     name = a.name or f"sweep_{a.config.stem}"
+    if not name.replace("-", "").replace("_", "").replace(".", "").isalnum() or name[0] == ".":
+        ap.error(f"--name {name!r}: letters, digits, '-', '_' and '.' only")
     storage = (a.out_dir / name).resolve()
+    with command_output(storage, "sweep", whole=True):
+        pass  # claimed for the sweep (refused: another command's or a user's folder)
     combos = [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())]
     space = {
         "config": str(a.config.resolve()),
@@ -189,10 +196,11 @@ def _write_table(rows: list[dict], path: Path) -> None:
     import csv
 
     cols = list(dict.fromkeys(k for r in rows for k in r))
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=cols)
-        w.writeheader()
-        w.writerows(rows)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols)
+    w.writeheader()
+    w.writerows(rows)
+    write_file(path, buf.getvalue())
     print("| " + " | ".join(cols) + " |")
     print("|" + "---|" * len(cols))
     for r in rows:

@@ -25,7 +25,9 @@ interrupted, imitation or PPO, to the run's own ``total_timesteps`` (give
 from __future__ import annotations
 
 import csv
+import io
 import json
+import os
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -35,16 +37,25 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from training.plumbing.common import given_flags, make_run_dir, parse_config, progress, to_toml
-from training.plumbing.safe_files import RunLock, read_npz
+from training.plumbing.common import (
+    Refusal,
+    command,
+    given_flags,
+    make_run_dir,
+    parse_config,
+    progress,
+    to_toml,
+)
+from training.plumbing.outputs import OutDir, RunLock, check_tree
+from training.plumbing.safe_files import read_csv, read_npz
 from training.policy_io import (
     UntrustedFileError,
     available,
-    find_snapshot,
     is_complete,
     load_optimizer,
     load_state,
     load_weights,
+    open_snapshot,
     policy_batch_actor,
     read_config,
     restore_normalizer,
@@ -136,28 +147,47 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
         save_snapshot(
             ckpt, model.policy, state, arrays={"data.npz": {"obs": data.obs, "act": data.act}}
         )
-    with open(run / "training_time.txt", "a") as fh:
-        fh.write(f"imitation: {len(data)} labelled env steps, {time.time() - t0:.0f} s wall\n")
-    with open(run / "imitation.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    handle = OutDir.open(run, create=False)
+    handle.append("training_time.txt",
+                  f"imitation: {len(data)} labelled env steps, {time.time() - t0:.0f} s wall\n")
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
+    handle.write("imitation.csv", buf.getvalue())
+    handle.close()
     return model, data
 
 
 def _resume_imitation(cfg: PPOConfig, where: Path, make_model, rng):
     """(model, data, (round, seed, rows, wall_s)) of an imitation checkpoint; the RNG restored."""
     from training import imitation
+    from training.plumbing.safe_files import read_snapshot
 
-    st = load_state(where)
-    z = read_npz(where / "data.npz", _data_spec(cfg))
+    snap = read_snapshot(where)
+    st = load_state(snap)
+    path = snap.name("state.json")
+    k = st.get("round")
+    if type(k) is not int or not 1 <= k <= cfg.bc_rounds:
+        raise UntrustedFileError(f"{path}: round must be an integer in [1, {cfg.bc_rounds}]")
+    seed, rows = st.get("seed"), st.get("rows")
+    if type(seed) is not int or not 0 <= seed < 2**62:
+        raise UntrustedFileError(f"{path}: seed must be an integer in [0, 2^62)")
+    if not isinstance(rows, list) or len(rows) != k or not all(isinstance(r, dict) for r in rows):
+        raise UntrustedFileError(f"{path}: rows must be one table per round done ({k})")
+    if "data.npz" not in snap:
+        raise UntrustedFileError(f"{snap.name('data.npz')}: missing")
+    z = read_npz(snap.name("data.npz"), _data_spec(cfg), data=snap.files["data.npz"])
     data = imitation.Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
     n = cfg.obs_dim()  # the statistics come with the weights
     model = make_model(np.zeros(n), np.ones(n))
-    load_weights(model.policy, where)
-    rng.bit_generator.state = st["rng"]
-    print(f"imitation: resuming at round {st['round']} ({len(data)} samples)", flush=True)
-    return model, data, (st["round"], st["seed"], st["rows"], st["wall_s"])
+    load_weights(model.policy, snap)
+    try:
+        rng.bit_generator.state = st["rng"]
+    except (KeyError, TypeError, ValueError, OverflowError):
+        raise UntrustedFileError(f"{path}: rng is not a PCG64 state") from None
+    print(f"imitation: resuming at round {k} ({len(data)} samples)", flush=True)
+    return model, data, (k, seed, rows, st["wall_s"])
 
 
 def _imitation_round(cfg: PPOConfig, model, data, k: int, gear, eta: str, t0: float) -> dict:
@@ -304,16 +334,37 @@ def selection_score(row: dict, select_by: str) -> float:
     return float(row["steps_min"] + 1e-3 * score) if select_by == "min" else score
 
 
-def _append_csv(path: Path, row: dict) -> None:
-    new = not path.exists()
-    with open(path, "a", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(row))
-        if new:
-            w.writeheader()
-        w.writerow(row)
+def _append_csv(run: OutDir, name: str, row: dict) -> None:
+    """Append one row to the run's CSV ``name`` (its header first when the file is new)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(row))
+    if run.kind(name) is None:
+        w.writeheader()
+    w.writerow(row)
+    run.append(name, buf.getvalue())
 
 
-def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0.0):
+def truncate_eval_csv(run: OutDir, n: int) -> int:
+    """Keep the ``eval.csv`` rows of evaluations at or before env step ``n`` (a resume's).
+
+    Evaluations after the checkpoint a resume continues from are redone by it; their rows
+    go, so that no row is duplicated. Returns the rows dropped.
+    """
+    if run.kind("eval.csv") is None:
+        return 0
+    rows = read_csv(run.path / "eval.csv", {"env_steps": int}, run.path)
+    text = run.read_text("eval.csv", 64 << 20)
+    lines = text.splitlines(keepends=True)
+    keep = [i for i, r in enumerate(rows) if 0 <= r["env_steps"] <= n]
+    if len(keep) == len(rows):
+        return 0
+    if keep != list(range(len(keep))):
+        raise UntrustedFileError(f"{run.path / 'eval.csv'}: rows out of env-step order")
+    run.write("eval.csv", "".join(lines[: 1 + len(keep)]))
+    return len(rows) - len(keep)
+
+
+def _callbacks(cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float = 0.0):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class EvalAndCheckpoint(BaseCallback):
@@ -332,7 +383,7 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0
             self.next_ckpt = cfg.checkpoint_freq
             self.best = best
             self.t0 = time.time() - wall0  # wall_s counts over every session of the run
-            self.csv = run / "eval.csv"
+            self.snapshots = Path(run.where())  # paths through the run's held descriptor
 
         def _on_training_start(self) -> None:
             # on resume, count from the restored step count, not from zero
@@ -355,7 +406,7 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0
         def checkpoint(self) -> None:
             """Save the resumable state (weights, optimiser, normaliser, counters)."""
             save_snapshot(
-                run / PPO_CKPT,
+                self.snapshots / PPO_CKPT,
                 self.model.policy,
                 {
                     "phase": "ppo",
@@ -375,14 +426,14 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0
                 cfg.env_id,
             )
             row = _eval_row(eps, n, time.time() - self.t0)
-            _append_csv(self.csv, row)
+            _append_csv(run, "eval.csv", row)
             for k in ("steps_mean", "distance_mean_m", "return_mean"):
                 self.logger.record(f"eval/{k}", row[k])
             score = selection_score(row, cfg.select_by)
             if score > self.best:
                 self.best = score
                 save_snapshot(
-                    run / "best",
+                    self.snapshots / "best",
                     self.model.policy,
                     {"num_timesteps": n, "score": score, "steps_mean": float(row["steps_mean"])},
                     vecnorm,
@@ -397,7 +448,7 @@ def _callbacks(cfg: PPOConfig, run: Path, vecnorm, best: float, wall0: float = 0
     return EvalAndCheckpoint()
 
 
-def write_settings(run: Path, cfg: PPOConfig) -> None:
+def write_settings(run: OutDir, cfg: PPOConfig) -> None:
     """Write ``env_settings.json`` beside config.toml: the validated env settings.
 
     Those of the env the policy runs in and of the training env (``EnvSettings.as_dict``);
@@ -409,51 +460,46 @@ def write_settings(run: Path, cfg: PPOConfig) -> None:
             "train_env": make_settings(**cfg.train_env_kwargs()).as_dict()}  # fmt: skip
     if cfg.curriculum_steps > 0:
         data["curriculum_env"] = make_settings(**cfg.train_env_kwargs(curriculum=True)).as_dict()
-    (run / "env_settings.json").write_text(json.dumps(data, indent=1) + "\n")
+    run.write("env_settings.json", json.dumps(data, indent=1) + "\n")
 
 
-def _resolve(argv: Sequence[str] | None) -> tuple[PPOConfig, Path]:
-    """The config and run directory: a new run, or a resumed one with its own settings.
-
-    Every refusal is one line (SystemExit) before anything is written.
-    """
+def _parse(argv: Sequence[str] | None) -> tuple[PPOConfig, set[str]]:
+    """The command line's config and the flags it gives (nothing read from a run yet)."""
     cfg = parse_config(PPOConfig, argv, __doc__.splitlines()[0])
-    if not cfg.resume:
-        try:
-            run = make_run_dir(cfg.out_dir, "train_ppo", cfg.env_id, cfg.seed, cfg, argv)
-            write_settings(run, cfg)
-            return cfg, run
-        except OSError as e:
-            raise SystemExit(
-                f"error: --out-dir {cfg.out_dir}: cannot create the run ({e})"
-            ) from None
-    run = Path(cfg.resume)
-    try:
-        saved = read_config(run)
-    except (FileNotFoundError, UntrustedFileError) as e:
-        raise SystemExit(f"error: --resume: {e}") from None
     given = given_flags(PPOConfig, argv) - {"resume", "config", "out_dir"}  # out_dir: the run's
-    ignored = sorted(given - set(RESUME_OVERRIDES))
-    if ignored:
-        raise SystemExit(
-            f"error: --resume continues a run with its own settings; only "
-            f"{list(RESUME_OVERRIDES)} may be given, not {ignored}"
-        )
-    cfg = replace(saved, **{k: getattr(cfg, k) for k in given}, resume=str(run))
+    if cfg.resume:
+        ignored = sorted(given - set(RESUME_OVERRIDES))
+        if ignored:
+            raise Refusal(
+                f"train_ppo: error: --resume continues a run with its own settings; only "
+                f"{list(RESUME_OVERRIDES)} may be given, not {ignored}"
+            )
+    return cfg, given
+
+
+def _resume_config(flags: PPOConfig, given: set[str], run: OutDir) -> PPOConfig:
+    """A resumed run's own config (with the run's lock held and its tree checked).
+
+    A new ``--total-timesteps`` becomes the run's own (its config.toml rewritten through the
+    run's descriptor, after the lock: a refused second writer changes nothing).
+    """
+    try:
+        saved = read_config(run.path)
+    except FileNotFoundError as e:
+        raise Refusal(f"train_ppo: error: --resume: {e}") from None
+    cfg = replace(saved, **{k: getattr(flags, k) for k in given}, resume=str(run.path))
     if (
-        not any(available(run, k) for k in ("checkpoint", "imitation"))
-        and not is_complete(run / IMITATION_CKPT)
-        and not is_complete(run / (IMITATION_CKPT + ".prev"))
+        not any(available(run.path, k) for k in ("checkpoint", "imitation"))
+        and not is_complete(run.path / IMITATION_CKPT)
+        and not is_complete(run.path / (IMITATION_CKPT + ".prev"))
     ):
-        raise SystemExit(
-            f"error: --resume: {run} has no complete snapshot to continue from "
+        raise Refusal(
+            f"train_ppo: error: --resume: {run.path} has no complete snapshot to continue from "
             f"({PPO_CKPT}, {IMITATION_CKPT} or imitation); start a new run instead"
         )
     if "total_timesteps" in given:  # a new total is the run's own from now on
-        tmp = run / "config.toml.tmp"
-        tmp.write_text(to_toml(replace(cfg, resume="")))
-        tmp.rename(run / "config.toml")
-    return cfg, run
+        run.write("config.toml", to_toml(replace(cfg, resume="")))
+    return cfg
 
 
 def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
@@ -537,15 +583,23 @@ def _monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads, curricu
     return venv
 
 
-def _monitor_file(run: Path, start: int) -> Path:
-    """A new monitor file of a training session, named by the env step it starts from."""
-    monitor, k = run / f"{start}.monitor.csv", 1
-    while monitor.exists():
-        monitor, k = run / f"{start}.{k}.monitor.csv", k + 1
-    return monitor
+def _monitor_file(run: OutDir, start: int) -> Path:
+    """A new monitor file of a training session, named by the env step it starts from.
+
+    Created empty here (``O_EXCL``, never through a link), then handed to SB3's monitor as a
+    path through the run's descriptor.
+    """
+    for k in range(1000):
+        name = f"{start}.monitor.csv" if k == 0 else f"{start}.{k}.monitor.csv"
+        try:
+            run.create_new(name)
+            return Path(run.where(name))
+        except FileExistsError:
+            continue
+    raise UntrustedFileError(f"{run.path}: 1000 monitor files of step {start} already")
 
 
-def _curriculum(cfg: PPOConfig, run: Path, vecnorm, seed: int, active: bool):
+def _curriculum(cfg: PPOConfig, run: OutDir, vecnorm, seed: int, active: bool):
     """A callback: after ``cfg.curriculum_steps`` env steps the training env drops its curriculum.
 
     ``active``: whether the training env has ``[curriculum_env]`` now. At the switch, a new env
@@ -576,96 +630,145 @@ def _curriculum(cfg: PPOConfig, run: Path, vecnorm, seed: int, active: bool):
     return Curriculum()
 
 
+_RUN: list[Path] = []
+"""The run directory of the command in progress (for the interrupt message)."""
+
+
+def _interrupted() -> str:
+    if not _RUN:
+        return "nothing was written"
+    run = _RUN[-1]
+    if any(available(run, k) for k in ("checkpoint", "imitation")) or is_complete(
+        run / IMITATION_CKPT
+    ):
+        return f"{run} keeps its last snapshot; continue with: " \
+               f"python -m training.train_ppo --resume {run}"  # fmt: skip
+    return f"{run} holds no snapshot yet (only its settings); start a new run"
+
+
+@command("train_ppo", _interrupted)
 def main(argv: Sequence[str] | None = None) -> int:
-    """Train (or resume) and write the run directory (one writer at a time: a lock)."""
-    cfg, run = _resolve(argv)
-    try:
-        with RunLock(run):
-            return _main(cfg, run)
-    except UntrustedFileError as e:
-        raise SystemExit(f"error: {e}") from None
-    except KeyboardInterrupt:
-        print(f"\ninterrupted; continue with: python -m training.train_ppo --resume {run}")
-        return 130
+    """Train (or resume) and write the run directory (one writer at a time: a lock).
+
+    A resumed run is untrusted: its lock is taken before anything in it is read or written,
+    then its tree is checked (plain files and directories only), then its config is read.
+    """
+    flags, given = _parse(argv)
+    _RUN.clear()
+    if flags.resume:
+        if not os.path.lexists(flags.resume):
+            raise Refusal(f"train_ppo: error: --resume: {flags.resume}: no such directory")
+        handle = OutDir.open(Path(flags.resume), create=False)
+    else:
+        try:
+            handle = make_run_dir(flags.out_dir, "train_ppo", flags.env_id, flags.seed, flags,
+                                  argv)  # fmt: skip
+        except (OSError, UntrustedFileError) as e:
+            why = e.strerror if isinstance(e, OSError) else str(e)
+            raise Refusal(f"train_ppo: error: --out-dir {flags.out_dir}: cannot create the run "
+                          f"({why})") from None  # fmt: skip
+    with handle, RunLock(handle):
+        _RUN.append(handle.path)
+        check_tree(handle)
+        if flags.resume:
+            cfg = _resume_config(flags, given, handle)
+        else:
+            cfg = flags
+            write_settings(handle, cfg)
+        return _main(cfg, handle)
 
 
-def _main(cfg: PPOConfig, run: Path) -> int:
+def _main(cfg: PPOConfig, run: OutDir) -> int:
     """:func:`main` with the run's lock held."""
     import torch
     from stable_baselines3.common.utils import set_random_seed
 
     torch.set_num_threads(cfg.torch_threads)
-    (run / "figures").mkdir(exist_ok=True)
-    print(f"run directory: {run}", flush=True)
+    run.subdir("figures").close()
+    print(f"run directory: {run.path}", flush=True)
     set_random_seed(cfg.seed)
-    resuming = available(run, "checkpoint")
-    start = load_state(find_snapshot(run, "checkpoint"))["num_timesteps"] if resuming else 0
+    resuming = available(run.path, "checkpoint")
+    checkpoint = open_snapshot(run.path, "checkpoint") if resuming else None
+    start = load_state(checkpoint)["num_timesteps"] if resuming else 0
+    if resuming:
+        dropped = truncate_eval_csv(run, start)
+        if dropped:
+            print(f"eval.csv: {dropped} evaluation(s) after the checkpoint ({start} env steps) "
+                  f"will be redone", flush=True)  # fmt: skip
     # one monitor file per session, named by the env step it starts from (never overwritten)
     in_curriculum = start < cfg.curriculum_steps
     venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, _monitor_file(run, start),
                                  curriculum=in_curriculum)  # fmt: skip
     try:
-        return _train(cfg, run, venv, vecnorm, start, resuming, in_curriculum)
+        return _train(cfg, run, venv, vecnorm, checkpoint, in_curriculum)
     finally:
         vecnorm.venv.close()  # the curriculum may have replaced the first
 
 
-def _train(
-    cfg: PPOConfig, run: Path, venv, vecnorm, start: int, resuming: bool, in_curriculum: bool
-) -> int:
-    """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env."""
+def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum: bool) -> int:
+    """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env.
+
+    ``checkpoint``: the :class:`~training.plumbing.safe_files.Snapshot` a resume continues
+    from (None: a new run).
+    """
     import torch
 
+    fs = Path(run.where())  # the run through its held descriptor: every snapshot written there
     best = -np.inf
-    if available(run, "best"):
-        best = load_state(find_snapshot(run, "best")).get("score", -np.inf)
+    if available(run.path, "best"):
+        best = load_state(open_snapshot(run.path, "best")).get("score", -np.inf)
     demos = None
+    resuming = checkpoint is not None
+    start = 0
     if resuming:
-        where = find_snapshot(run, "checkpoint")
         n = cfg.obs_dim()
-        model = make_model(cfg, vecnorm, run, np.zeros(n), np.ones(n))
-        load_weights(model.policy, where)
-        load_optimizer(model.policy, where)
-        restore_normalizer(vecnorm, where)
-        state = load_state(where)
-        model.num_timesteps = int(state["num_timesteps"])
+        model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
+        load_weights(model.policy, checkpoint)
+        load_optimizer(model.policy, checkpoint)
+        restore_normalizer(vecnorm, checkpoint)
+        state = load_state(checkpoint)
+        model.num_timesteps = start = state["num_timesteps"]
         best = max(best, state.get("best", -np.inf))
         print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
-    elif cfg.teacher and available(run, "imitation"):
+    elif cfg.teacher and available(run.path, "imitation"):
         n = cfg.obs_dim()
-        model = make_model(cfg, vecnorm, run, np.zeros(n), np.ones(n))
-        load_weights(model.policy, find_snapshot(run, "imitation"))
+        model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
+        load_weights(model.policy, open_snapshot(run.path, "imitation"))
         print("starting PPO from the run's imitation result", flush=True)
     elif cfg.teacher:
         model, demos = imitation_warm_start(
-            cfg, run, lambda mean, var: make_model(cfg, vecnorm, run, mean, var)
+            cfg, fs, lambda mean, var: make_model(cfg, vecnorm, fs, mean, var)
         )
     else:
-        model = make_model(cfg, vecnorm, run)
+        model = make_model(cfg, vecnorm, fs)
     if model.num_timesteps == 0:
         if len(cfg.log_std_joints) == 5:
             model.policy.log_std.data[:] = torch.as_tensor(cfg.log_std_joints)
         elif cfg.log_std_joints:
-            raise SystemExit("--log-std-joints needs 5 values (one per joint) or none")
+            raise Refusal("train_ppo: error: --log-std-joints needs 5 values (one per joint) "
+                          "or none")  # fmt: skip
         if cfg.action_std_nm > 0:
             gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
             model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
-        if cfg.teacher and not available(run, "imitation"):  # the imitation result alone
+        if cfg.teacher and not available(run.path, "imitation"):  # the imitation result alone
             arrays = {"demos.npz": {"obs": demos.obs, "act": demos.act}}
-            save_snapshot(run / "imitation", model.policy, {"num_timesteps": 0}, vecnorm,
+            save_snapshot(fs / "imitation", model.policy, {"num_timesteps": 0}, vecnorm,
                           arrays=arrays)  # fmt: skip
     anchor = None
     if cfg.teacher and cfg.bc_anchor_steps > 0:
         from training.imitation import Anchor, Dataset
 
-        z = read_npz(find_snapshot(run, "imitation") / "demos.npz", _data_spec(cfg))
+        snap = open_snapshot(run.path, "imitation")
+        if "demos.npz" not in snap:
+            raise UntrustedFileError(f"{snap.name('demos.npz')}: missing")
+        z = read_npz(snap.name("demos.npz"), _data_spec(cfg), data=snap.files["demos.npz"])
         demos = Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
         anchor = Anchor(
             model.policy, demos, cfg.bc_anchor_lr, weights=bc_weights(cfg), seed=cfg.seed
         )
     remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
     t0 = time.time()
-    wall0 = load_state(find_snapshot(run, "checkpoint")).get("wall_s", 0.0) if resuming else 0.0
+    wall0 = load_state(checkpoint).get("wall_s", 0.0) if resuming else 0.0
     callback = _callbacks(cfg, run, vecnorm, best, float(wall0))
     if remaining > 0:
         print(f"PPO: {remaining} env steps to go", flush=True)
@@ -682,14 +785,16 @@ def _train(
         )
         callback.checkpoint()
     wall = time.time() - t0
-    save_snapshot(run / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
-    with open(run / "training_time.txt", "a") as fh:
-        fh.write(f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
+    save_snapshot(fs / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
+    run.append("training_time.txt",
+               f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
     from training.plumbing.plots import learning_curve
 
-    learning_curve(run, run / "figures" / "learning_curve.png")
+    with run.subdir("figures") as figs:
+        learning_curve(run.path, Path(figs.where()) / "learning_curve.png")
     print(
-        f"done: {model.num_timesteps} env steps in {wall:.0f} s; run directory: {run}", flush=True
+        f"done: {model.num_timesteps} env steps in {wall:.0f} s; run directory: {run.path}",
+        flush=True,
     )
     return 0
 

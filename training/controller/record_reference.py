@@ -13,7 +13,6 @@ The shipped files are in ``biped_constraint_env/data`` (the default ``--out``).
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,8 @@ from biped_constraint_env.env import ConstrainedBipedEnv
 from biped_constraint_env.observation import OBS_HIP
 from biped_constraint_env.reference import DATA_DIR, REFERENCES, save_reference
 from training.controller.model_controller import TEACHER, controller_from
+from training.plumbing.common import CliParser, command
+from training.plumbing.outputs import command_output
 
 
 def record(
@@ -55,22 +56,23 @@ def record(
     return {k: np.array(v) for k, v in rows.items()}, env.dt
 
 
+@command("record_reference")
 def main(argv: list[str] | None = None) -> int:
     """Record both references."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=10.0, help="simulated time per walk [s]")
     ap.add_argument("--gait-step", type=int, default=5, help="the step of the gait's table")
     ap.add_argument("--out", type=Path, default=DATA_DIR)
     a = ap.parse_args(argv)
-    a.out.mkdir(parents=True, exist_ok=True)
-    for start in REFERENCES:
-        arrays, dt = record(start, a.seconds)
-        if arrays["step"].max() <= a.gait_step:
-            ap.error(f"--gait-step {a.gait_step}: the {start} walk completed only "
-                     f"{arrays['step'].max()} steps")  # fmt: skip
-        path = a.out / f"reference_{start}.npz"
-        save_reference(path, dt=dt, gait_step=a.gait_step, **arrays)
-        print(f"{path}: {len(arrays['q'])} periods, {arrays['step'].max()} steps")
+    with command_output(a.out, "record_reference") as co:
+        for start in REFERENCES:
+            arrays, dt = record(start, a.seconds)
+            if arrays["step"].max() <= a.gait_step:
+                ap.error(f"--gait-step {a.gait_step}: the {start} walk completed only "
+                         f"{arrays['step'].max()} steps")  # fmt: skip
+            name = f"reference_{start}.npz"
+            save_reference(Path(co.dir().where(name)), dt=dt, gait_step=a.gait_step, **arrays)
+            print(f"{a.out / name}: {len(arrays['q'])} periods, {arrays['step'].max()} steps")
     return 0
 
 

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import time
 from collections.abc import Callable
@@ -57,7 +58,9 @@ from training.controller.model_controller import (
     midstride_state,
     run_episode,
 )
-from training.plumbing.common import progress
+from training.plumbing.common import CliParser, command, progress
+from training.plumbing.outputs import command_output
+from training.plumbing.safe_files import read_json_object
 from training.plumbing.distributed import connect, run_tasks, shutdown
 
 BOUNDS: dict[str, tuple[float, float]] = {
@@ -253,8 +256,9 @@ def search(
 
     ``costs(candidates)`` gives each candidate's (cost, record) at once (lower is better;
     the record goes into ``history.csv``). After every iteration the best candidate so far
-    is written to ``a.out / best_file``.
+    is written to ``a.out / best_file`` (through ``a.handle``, the command's output).
     """
+    out = a.handle
     names = list(bounds)
     lo = np.array([bounds[n][0] for n in names])
     hi = np.array([bounds[n][1] for n in names])
@@ -263,7 +267,6 @@ def search(
         np.clip(z0, 0.05, 0.95), a.sigma,
         {"popsize": a.population, "bounds": [0, 1], "seed": a.seed + 1, "verbose": -9},
     )  # fmt: skip
-    a.out.mkdir(parents=True, exist_ok=True)
     best: tuple[float, dict] = (np.inf, dict(x0))
     rows: list[dict] = []
     t0 = time.time()
@@ -278,11 +281,12 @@ def search(
                 best = (cost, cand)
         print(f"iteration {it}: best cost {min(c for c, _ in results):.3f}, so far "
               f"{best[0]:.3f} ({time.time() - t0:.0f} s)", flush=True)  # fmt: skip
-        (a.out / best_file).write_text(json.dumps(best[1], indent=1) + "\n")
-        with open(a.out / "history.csv", "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        out.write(best_file, json.dumps(best[1], indent=1) + "\n")
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+        out.write("history.csv", buf.getvalue())
     return best
 
 
@@ -317,9 +321,10 @@ def _start_costs(a: argparse.Namespace, gains: dict[str, float]):
     return costs
 
 
+@command("tune", "the iterations done so far are kept in the --out folder")
 def main(argv: list[str] | None = None) -> int:
     """``python -m training.controller.tune``: see the module docstring."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = CliParser(description=__doc__.split("\n")[0])
     ap.add_argument("--phase", choices=("gait", "start"), default="gait")
     ap.add_argument("--iterations", type=int, default=None, help="default: 10 gait, 30 start")
     ap.add_argument("--population", type=int, default=None, help="default: 24 gait, 12 start")
@@ -353,17 +358,25 @@ def main(argv: list[str] | None = None) -> int:
     if not 1 <= a.starts <= len(STARTS) or a.seeds < 1:
         ap.error(f"--starts must be in 1..{len(STARTS)} and --seeds >= 1")
     if gait:
+        init = {**DEFAULT_GAINS, **(read_json_object(a.init) if a.init else {})}
+        bad = [k for k, v in init.items() if k not in DEFAULT_GAINS
+               or isinstance(v, bool) or not isinstance(v, int | float)]  # fmt: skip
+        if bad:
+            ap.error(f"--init {a.init}: {bad[0]!r} is not a gain of the controller")
         connect(a.ray, a.ray_address)
-        init = {**DEFAULT_GAINS, **(json.loads(a.init.read_text()) if a.init else {})}
         try:
-            cost, best = search(BOUNDS, init, _gait_costs(a, init), a, "best_gains.json")
+            with command_output(a.out, "tune", keep_on_interrupt=True) as co:
+                a.handle = co.dir()
+                cost, best = search(BOUNDS, init, _gait_costs(a, init), a, "best_gains.json")
         finally:
             shutdown()
         print(f"best score {-cost:.2f}; gains in {a.out / 'best_gains.json'}")
         return 0
     gains = _read_gains(a.gains, a.gains)
     x0 = {**gains, "hy_swing": START_BOUNDS["hy_swing"][0]}  # swing at once
-    cost, best = search(START_BOUNDS, x0, _start_costs(a, gains), a, "best_start.json")
+    with command_output(a.out, "tune", keep_on_interrupt=True) as co:
+        a.handle = co.dir()
+        cost, best = search(START_BOUNDS, x0, _start_costs(a, gains), a, "best_start.json")
     print(f"best cost {cost:.3f}; wrote {a.out / 'best_start.json'} (ship as "
           f"{CONTROLLERS_DIR}/NAME.json)")  # fmt: skip
     return 0

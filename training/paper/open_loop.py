@@ -29,7 +29,8 @@ import numpy as np
 
 import biped_constraint_env  # noqa: F401  (registers the env)
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, sample_initial_q
-from training.plumbing.common import make_run_dir, parse_config, progress
+from training.plumbing.common import command, make_run_dir, parse_config, progress
+from training.plumbing.outputs import write_file
 
 TABLES: dict[str, np.ndarray] = {
     "table2": np.array(
@@ -158,11 +159,12 @@ def noisy_starts(cfg: OpenLoopConfig) -> list[dict]:
     return out
 
 
+@command("open_loop")
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the baseline and write its run directory."""
     cfg = parse_config(OpenLoopConfig, argv, __doc__.splitlines()[0])
     out = run(cfg)
-    rd = make_run_dir(cfg.out_dir, "open_loop", cfg.env_id, cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "open_loop", cfg.env_id, cfg.seed, cfg, argv).path
     print(f"run directory: {rd}")
     from training.plumbing import plots
 
@@ -186,7 +188,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     summary = {k: v for k, v in out.items() if k not in ("frames", "images")}
     if cfg.noise_seeds:
         summary["noisy_starts"] = noisy_starts(cfg)
-    (rd / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_file(rd / "summary.json", json.dumps(summary, indent=2) + "\n")
     print(
         f"steps completed: {out['steps_completed']}   distance (hip): {out['distance_m']:.3f} m   "
         f"simulated: {out['t_end_s']:.3f} s"

@@ -37,8 +37,10 @@ from biped_constraint_env.actions import TORQUE_LIMIT_NM
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, SimArrays, advance
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, midstride_start, start_slots
 from biped_constraint_env.state import ST_MODE, ST_STEPS
-from training.plumbing.common import make_run_dir, parse_config, progress
+from training.plumbing.common import command, make_run_dir, parse_config, progress
 from training.plumbing.distributed import connect, cpu_count, init_ray, run_tasks, shutdown
+from training.plumbing.outputs import write_file
+from training.policy_io import json_text
 
 
 @dataclass
@@ -179,11 +181,12 @@ def robustness(cfg, seeds: int = 10) -> tuple[dict, list[int]]:
     return exact, [r["steps_completed"] for r in noisy]
 
 
+@command("optimize_open_loop")
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the searches and write the best table."""
     cfg = parse_config(OptimiseConfig, argv, __doc__.splitlines()[0])
     connect(cfg.ray, cfg.ray_address)
-    rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv).path
     print(f"run directory: {rd}")
     results = []
     try:
@@ -219,13 +222,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"posture = {json.dumps(list(oc.posture))}\n"
         f"velocity = {json.dumps(list(oc.velocity))}\nmode = {oc.mode}\n"
     )
-    (rd / "best_open_loop.toml").write_text(toml)
-    (rd / "summary.json").write_text(
-        json.dumps(
-            {"searches": results, "best": top, "env_run": exact, "robustness_steps_10_seeds": rob},
-            indent=1,
-        )
-    )
+    write_file(rd / "best_open_loop.toml", toml)
+    write_file(rd / "summary.json", json_text(
+        {"searches": results, "best": top, "env_run": exact, "robustness_steps_10_seeds": rob}))
     print(toml)
     print(f"through the env: {exact}")
     print(f"steps over 10 reset-noise seeds: {rob}")

@@ -25,7 +25,8 @@ from biped_constraint_env import paper_biped
 from biped_constraint_env.modes import EventCode
 from biped_constraint_env.simulator import PAPER_OPTIONS, SimOptions, SimState, step
 from training.paper.open_loop import TABLES
-from training.plumbing.common import make_run_dir, parse_config
+from training.plumbing.common import command, make_run_dir, parse_config
+from training.plumbing.outputs import save_figure, write_file
 
 
 @dataclass
@@ -67,6 +68,7 @@ def rollout(params, q0, table, options, seconds):
     }
 
 
+@command("paper_numerics")
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the three settings and write the comparison."""
     cfg = parse_config(NumericsConfig, argv, __doc__.splitlines()[0])
@@ -94,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             params, cfg.posture, table, reference.replace(strict=True), cfg.seconds
         ),
     }
-    rd = make_run_dir(cfg.out_dir, "paper_numerics", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "paper_numerics", "ConstrainedBiped-v0", cfg.seed, cfg, argv).path
     import matplotlib
 
     matplotlib.use("Agg")
@@ -114,10 +116,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ax.set_title(f"Table 2, signs {cfg.signs}, K = {cfg.friction_ratio}, impact {cfg.impact}")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(rd / "figures" / "paper_vs_reference.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, rd / "figures" / "paper_vs_reference.png", dpi=110)
     out = {k: {kk: vv for kk, vv in v.items() if kk != "trace"} for k, v in runs.items()}
-    (rd / "summary.json").write_text(json.dumps(out, indent=1) + "\n")
+    write_file(rd / "summary.json", json.dumps(out, indent=1) + "\n")
     for label, r in out.items():
         print(f"{label}: {r['steps']} steps, ended by {r['end']}")
         print(f"   switches: {r['switches']}")

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import csv
 import gzip
+import io
 import itertools
 import json
 import sys
@@ -50,8 +51,9 @@ from biped_constraint_env.simulator import (
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD
 from biped_constraint_env.state import FS_ROOT, ST_STEPS
 from training.paper.open_loop import TABLES
-from training.plumbing.common import make_run_dir, parse_config
+from training.plumbing.common import command, make_run_dir, parse_config
 from training.plumbing.distributed import TasksFailed, connect, run_tasks, shutdown
+from training.plumbing.outputs import save_figure, write_file
 
 SIGNS = np.array(list(itertools.product((1, -1), repeat=5)), dtype=float)
 
@@ -147,6 +149,7 @@ def refine(
     return best_q, int(best)
 
 
+@command("table2_study")
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the study and write its run directory."""
     import dataclasses
@@ -155,7 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     connect(cfg.ray, cfg.ray_address)
     rng = np.random.default_rng(cfg.seed)
     postures = sample_postures(cfg.postures, rng)
-    rd = make_run_dir(cfg.out_dir, "table2_study", "ConstrainedBiped-v0", cfg.seed, cfg, argv)
+    rd = make_run_dir(cfg.out_dir, "table2_study", "ConstrainedBiped-v0", cfg.seed, cfg, argv).path
     print(f"run directory: {rd}")
     tables = np.repeat(TABLES["table2"][None] * SIGNS[:, None, :], len(postures), axis=0)
     qs = np.tile(postures, (len(SIGNS), 1))
@@ -187,12 +190,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         best = _refine_best(summary, sets, mode, cfg, rng)
         if best is not None:
             summary[f"best_{mode}"] = best
-    with gzip.open(rd / "readings.csv.gz", "wt", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["option_set", "sign_index", "posture_index", "steps", "root_y_m", "end_code"])
-        w.writerows(rows)
-    (rd / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    np.save(rd / "postures.npy", postures)
+    text = io.StringIO()
+    w = csv.writer(text)
+    w.writerow(["option_set", "sign_index", "posture_index", "steps", "root_y_m", "end_code"])
+    w.writerows(rows)
+    write_file(rd / "readings.csv.gz", gzip.compress(text.getvalue().encode(), mtime=0))
+    write_file(rd / "summary.json", json.dumps(summary, indent=1) + "\n")
+    buf = io.BytesIO()
+    np.save(buf, postures)
+    write_file(rd / "postures.npy", buf.getvalue())
     _figures(summary, rd)
     print(f"{'option set':<34} {'>=1':>5} {'>=2':>5} {'>=4':>5} {'max':>4}  most common end")
     for name, v in summary["option_sets"].items():
@@ -287,8 +293,7 @@ def _figures(summary: dict, rd: Path) -> None:
     ax.set_title("Table 2: readings that complete walking steps")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(rd / "figures" / "steps_by_option_set.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, rd / "figures" / "steps_by_option_set.png", dpi=110)
     total = Counter()
     for v in summary["option_sets"].values():
         total.update(v["ends"])
@@ -298,8 +303,7 @@ def _figures(summary: dict, rd: Path) -> None:
     ax.set_xlabel("readings (all option sets)")
     ax.set_title("what ends the Table 2 walks")
     fig.tight_layout()
-    fig.savefig(rd / "figures" / "end_reasons.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, rd / "figures" / "end_reasons.png", dpi=110)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import errno
 import datetime as _dt
 import json
 import math
@@ -123,16 +124,106 @@ def field_help(cls: type) -> dict[str, str]:
     return out
 
 
-class CliParser(argparse.ArgumentParser):
-    """argparse with one line per refusal: ``PROG: error: WHAT (see --help)``, exit status 1.
+class Refusal(SystemExit):
+    """A refusal: one line (its message), exit status 2.
 
-    The message travels in the ``SystemExit`` (a test can match it); no usage block is
-    printed above it.
+    A ``SystemExit`` whose ``str`` is the line (a test can match it); :func:`command` prints
+    it. Uncaught elsewhere, the interpreter exits with status 2 without a traceback.
     """
+
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.code = 2
+
+
+EXPECTED_ERRNOS = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is exceeded",
+    errno.EROFS: "a read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+    errno.ENOENT: "no such file or directory",
+    errno.ENOTDIR: "not a directory",
+    errno.EISDIR: "a directory",
+    errno.ELOOP: "a symlink",
+    errno.EEXIST: "already exists",
+    errno.ENAMETOOLONG: "a name too long",
+    errno.EIO: "an input/output error",
+}
+"""File-system failures that are the machine's state, not a bug: each refused in one line."""
+
+
+def command(prog: str, interrupted: str = "nothing was written"):
+    """Decorate a command's ``main``: every expected failure one line, exit status 2.
+
+    A refused file or value (:class:`UntrustedFileError`, ``FileNotFoundError``), a full or
+    read-only disk, a link where a file belongs: ``PROG: error: WHAT``. Ctrl-C:
+    ``PROG: interrupted; INTERRUPTED`` and status 130 (``interrupted`` may be a callable of
+    no arguments, for a message known only at run time). Unexpected exceptions keep their
+    traceback.
+    """
+    import functools
+
+    def wrap(main):
+        @functools.wraps(main)
+        def run(*args, **kwargs):
+            from training.plumbing.safe_files import UntrustedFileError
+
+            _PROG.append(prog)
+            try:
+                return main(*args, **kwargs)
+            except Refusal as e:
+                if not getattr(e, "printed", False):  # once, by the innermost command
+                    print(str(e), file=sys.stderr, flush=True)
+                    e.printed = True
+                raise
+            except (UntrustedFileError, FileNotFoundError) as e:
+                line = f"{prog}: error: {_one_line(e)}"
+            except OSError as e:
+                if e.errno not in EXPECTED_ERRNOS:
+                    raise
+                where = e.filename or ""
+                line = f"{prog}: error: {where}{': ' if where else ''}{EXPECTED_ERRNOS[e.errno]}"
+            except KeyboardInterrupt:
+                text = interrupted() if callable(interrupted) else interrupted
+                print(f"\n{prog}: interrupted; {text}", file=sys.stderr, flush=True)
+                raise SystemExit(130) from None
+            finally:
+                _PROG.pop()
+            print(line, file=sys.stderr, flush=True)
+            refusal = Refusal(line)
+            refusal.printed = True
+            raise refusal from None
+
+        return run
+
+    return wrap
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return text[0] if text else type(e).__name__
+
+
+_PROG: list[str] = []
+"""The names of the commands running (the innermost last): a parser's default ``prog``."""
+
+
+class CliParser(argparse.ArgumentParser):
+    """argparse with one line per refusal: ``PROG: error: WHAT (see --help)``, exit status 2.
+
+    The message travels in the :class:`Refusal` (a test can match it); no usage block is
+    printed above it. ``prog`` defaults to the running :func:`command`'s name.
+    """
+
+    def __init__(self, *args, **kwargs):
+        if "prog" not in kwargs and _PROG:
+            kwargs["prog"] = _PROG[-1]
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         """Refuse with one line naming the flag or file."""
-        raise SystemExit(f"{self.prog}: error: {message} (see --help)")
+        raise Refusal(f"{self.prog}: error: {message} (see --help)")
 
 
 def _parser(cls: type, description: str) -> argparse.ArgumentParser:
@@ -262,19 +353,32 @@ def _git(args: list[str], cwd: Path) -> str:
 
 def make_run_dir(
     out_dir: Path, script: str, env_id: str, seed: int, cfg: Any, argv: Sequence[str] | None
-) -> Path:
-    """Create a fresh run directory and write config.toml, command.txt and versions.json."""
+):
+    """Create a fresh run directory with config.toml, command.txt and versions.json.
+
+    ``OUT_DIR/SCRIPT/ENV__seedS__STAMP`` is made with ``mkdir`` through its opened parent
+    (a name that exists, a link included, takes the next suffix). Returns the run's
+    :class:`~training.plumbing.outputs.OutDir` (its ``path`` is the directory's name).
+    """
+    from training.plumbing.outputs import OutDir
+
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    run = Path(out_dir) / script / f"{env_id}__seed{seed}__{stamp}"
-    suffix = 1
-    while run.exists():
-        run = Path(out_dir) / script / f"{env_id}__seed{seed}__{stamp}-{suffix}"
-        suffix += 1
-    (run / "figures").mkdir(parents=True)
-    (run / "config.toml").write_text(to_toml(cfg))
+    with OutDir.open(Path(out_dir) / script) as parent:
+        for suffix in range(1000):
+            name = f"{env_id}__seed{seed}__{stamp}" + (f"-{suffix}" if suffix else "")
+            try:
+                os.mkdir(name, 0o755, dir_fd=parent.fd)
+                break
+            except FileExistsError:
+                continue
+        else:
+            raise FileExistsError(errno.EEXIST, "1000 runs of this second", str(parent.path))
+        run = parent.subdir(name, create=False)
+    run.subdir("figures").close()
+    run.write("config.toml", to_toml(cfg))
     cmd = [sys.executable, "-m", f"training.{script}", *(sys.argv[1:] if argv is None else argv)]
-    (run / "command.txt").write_text(" ".join(cmd) + "\n")
-    (run / "versions.json").write_text(json.dumps(versions(), indent=2) + "\n")
+    run.write("command.txt", " ".join(cmd) + "\n")
+    run.write("versions.json", json.dumps(versions(), indent=2) + "\n")
     return run
 
 
@@ -308,15 +412,6 @@ def refusals(parser: argparse.ArgumentParser) -> Iterator[None]:
         yield
     except (UntrustedFileError, FileNotFoundError) as e:
         parser.error(str(e))
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``path`` whole or not at all (a temporary file beside it, then a rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 def progress(iterable, total: int | None = None, desc: str = "", enabled: bool = True):

@@ -8,6 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+from training.plumbing.outputs import save_figure
+from training.plumbing.safe_files import read_csv
+
+EVAL_COLUMNS = {"env_steps": int, "steps_mean": float, "steps_min": float, "return_mean": float}
+"""The columns of a run's ``eval.csv`` that the figures read."""
+
 SEGMENTS = (
     ("stance_toe", "stance_heel"),
     ("stance_heel", "stance_ankle"),
@@ -53,8 +59,7 @@ def stick_strip(frames: Sequence[dict], path: Path, title: str, every: int = 5) 
     ax.set_ylabel("z [m]")
     ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 def mode_timeline(
@@ -76,8 +81,7 @@ def mode_timeline(
     ax.set_ylabel("model")
     ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
@@ -98,27 +102,23 @@ def learning_curve(run: Path, path: Path) -> None:
     With an imitation warm start (``imitation.csv``), a first panel shows the student's steps
     after each DAgger round against the demonstration samples collected so far.
     """
-    import csv
-
     plt = _mpl()
     imitation = run / "imitation.csv"
-    files = sorted(run.glob("*.monitor.csv"), key=lambda f: int(f.name.split(".")[0]))
+    files = sorted((int(f.name.split(".")[0]), f) for f in run.glob("*.monitor.csv")
+                   if f.name.split(".")[0].isdigit())  # fmt: skip
     mon, x = [], []
-    for f in files:  # <start step>.monitor.csv of each session
-        with open(f) as fh:
-            rows = list(csv.reader(fh))[2:]
-        start = int(f.name.split(".")[0])
-        x.extend(start + np.cumsum([int(r[1]) for r in rows]))
+    for start, f in files:  # <start step>.monitor.csv of each session
+        rows = read_csv(f, {"r": float, "l": int, "steps_completed": int}, run, comment_lines=1)
+        x.extend(start + np.cumsum([r["l"] for r in rows]))
         mon.extend(rows)
     x = np.array(x)
-    rets = np.array([float(r[0]) for r in mon])
-    steps = np.array([int(r[3]) for r in mon])
+    rets = np.array([r["r"] for r in mon])
+    steps = np.array([r["steps_completed"] for r in mon])
     fig, axes = plt.subplots(1, 3 if imitation.exists() else 2, figsize=(16, 3.8))
     if imitation.exists():
-        with open(imitation) as fh:
-            im = list(csv.DictReader(fh))
-        n = [int(r["samples"]) for r in im]
-        st = [json.loads(r["student_steps"]) for r in im]
+        im = read_csv(imitation, {"samples": int, "student_steps": json.loads}, run)
+        n = [r["samples"] for r in im]
+        st = [r["student_steps"] for r in im]
         axes[0].plot(n, [np.mean(v) for v in st], "o-", label="student, mean of 5 episodes")
         axes[0].plot(n, [np.min(v) for v in st], "x--", label="student, min")
         axes[0].set_xlabel("labelled samples (DART, then DAgger rounds)")
@@ -136,12 +136,11 @@ def learning_curve(run: Path, path: Path) -> None:
         axes[0].plot(x[window - 1 :], smooth(steps), lw=1, label="training episodes (moving mean)")
         axes[1].plot(x[window - 1 :], smooth(rets), lw=1, label="training episodes (moving mean)")
     if (run / "eval.csv").exists():
-        with open(run / "eval.csv") as fh:
-            ev = list(csv.DictReader(fh))
-        ex = [int(r["env_steps"]) for r in ev]
+        ev = read_csv(run / "eval.csv", EVAL_COLUMNS, run)
+        ex = [r["env_steps"] for r in ev]
         lab = "evaluation (deterministic policy, seeded episodes)"
-        axes[0].plot(ex, [float(r["steps_mean"]) for r in ev], "o-", label=lab)
-        axes[1].plot(ex, [float(r["return_mean"]) for r in ev], "o-", label=lab)
+        axes[0].plot(ex, [r["steps_mean"] for r in ev], "o-", label=lab)
+        axes[1].plot(ex, [r["return_mean"] for r in ev], "o-", label=lab)
     axes[0].set_ylabel("completed walking steps per episode")
     axes[1].set_ylabel("return")
     axes[0].set_title("PPO from the imitation result" if imitation.exists() else "PPO", fontsize=9)
@@ -150,8 +149,7 @@ def learning_curve(run: Path, path: Path) -> None:
         ax.legend(fontsize=8)
         ax.grid(lw=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def selection_curves(runs: Sequence[Path], labels: Sequence[str], path: Path) -> None:
@@ -161,22 +159,20 @@ def selection_curves(runs: Sequence[Path], labels: Sequence[str], path: Path) ->
     steps of each evaluation against env steps, one colour per run, or per group of runs
     labelled "GROUP, ..." (a line style per run of a group).
     """
-    import csv
-
     plt = _mpl()
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), sharey=True)
     groups = [label.split(",")[0] for label in labels]
     order = list(dict.fromkeys(groups))
     seen: dict[str, int] = {}
     for run, label, group in zip(runs, labels, groups, strict=True):
-        with open(Path(run) if Path(run).suffix == ".csv" else Path(run) / "eval.csv") as fh:
-            ev = list(csv.DictReader(fh))
-        x = [int(r["env_steps"]) / 1e6 for r in ev]
+        ev = read_csv(Path(run) if Path(run).suffix == ".csv" else Path(run) / "eval.csv",
+                      EVAL_COLUMNS)  # fmt: skip
+        x = [r["env_steps"] / 1e6 for r in ev]
         style = ("-", "--", ":", "-.")[seen.get(group, 0) % 4]
         seen[group] = seen.get(group, 0) + 1
         colour = plt.get_cmap("tab20" if len(order) > 10 else "tab10")(order.index(group))
         for ax, key in zip(axes, ("steps_mean", "steps_min"), strict=True):
-            ax.plot(x, [float(r[key]) for r in ev], "o", ls=style, ms=3, color=colour,
+            ax.plot(x, [r[key] for r in ev], "o", ls=style, ms=3, color=colour,
                     label=label)  # fmt: skip
     axes[0].set_ylabel(
         "completed steps (selection episodes:\n6000 periods, 30 s at 5 ms, 120 s at 20 ms)",
@@ -190,8 +186,7 @@ def selection_curves(runs: Sequence[Path], labels: Sequence[str], path: Path) ->
         ax.grid(lw=0.3)
     axes[1].legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def initiation_strip(frames: Sequence[dict], path: Path, title: str, every_s: float = 0.1) -> None:
@@ -239,5 +234,4 @@ def initiation_strip(frames: Sequence[dict], path: Path, title: str, every_s: fl
     bx.legend(fontsize=7, loc="upper left")
     bx.grid(lw=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)

@@ -10,18 +10,15 @@ and what was expected; the commands print it and exit with status 2.
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
+import ast
+import errno
+import io
 import hashlib
 import json
 import os
-import shutil
-import socket
 import struct
-import tempfile
 import tomllib
 import zipfile
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -62,19 +59,17 @@ def inside(root: Path, path: Path) -> Path:
 
 
 def read_bytes(path: Path, limit: int, root: Path | None = None) -> bytes:
-    """A regular file's bytes, refused when larger than ``limit`` or a symlink."""
+    """A regular file's bytes, refused when larger than ``limit``, a symlink, FIFO or device.
+
+    Opened once with ``O_NOFOLLOW``; the size and kind are read from the open file.
+    """
     path = Path(path)
     if root is not None:
         inside(root, path)
-    if path.is_symlink():
-        raise UntrustedFileError(f"{path}: a symlink (policy and run directories hold none)")
-    if not path.is_file():
-        raise UntrustedFileError(f"{path}: missing (or not a regular file)")
-    size = path.stat().st_size
-    if size > limit:
-        raise UntrustedFileError(f"{path}: {size} bytes, more than the {limit} allowed")
-    with open(path, "rb") as fh:
-        return fh.read(limit + 1)[:limit]
+    try:
+        return _read_in(None, str(path), path, limit)
+    except FileNotFoundError:
+        raise UntrustedFileError(f"{path}: missing (or not a regular file)") from None
 
 
 def read_toml(path: Path, root: Path | None = None) -> dict[str, Any]:
@@ -83,35 +78,106 @@ def read_toml(path: Path, root: Path | None = None) -> dict[str, Any]:
     try:
         return tomllib.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise UntrustedFileError(f"{path}: not valid TOML ({e})") from None
+        raise UntrustedFileError(f"{path}: not valid TOML ({str(e)[:120]})") from None
+    except RecursionError:
+        raise UntrustedFileError(f"{path}: not valid TOML (nested too deeply)") from None
 
 
 def read_json_object(path: Path, root: Path | None = None) -> dict[str, Any]:
-    """A JSON object of at most :data:`MAX_TEXT_BYTES` (anything else is refused)."""
-    data = read_bytes(path, MAX_TEXT_BYTES, root)
+    """A JSON object of at most :data:`MAX_TEXT_BYTES` (anything else, NaN too, is refused)."""
+    return parse_json_object(read_bytes(path, MAX_TEXT_BYTES, root), Path(path))
+
+
+MAX_CSV_BYTES = 64 << 20
+"""Largest CSV log read (64 MiB: a long run's monitor files are a few MB)."""
+
+
+def read_csv(
+    path: Path, types: dict[str, type], root: Path | None = None, comment_lines: int = 0
+) -> list[dict[str, Any]]:
+    """A bounded CSV log's rows, each of ``types``' columns converted (finite numbers).
+
+    ``comment_lines``: leading lines to skip (SB3's monitor files start with one). A missing
+    column, a value of the wrong kind or a non-finite number is refused naming the row.
+    """
+    import csv
+
+    data = read_bytes(path, MAX_CSV_BYTES, root)
     try:
-        out = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as e:
-        raise UntrustedFileError(f"{path}: not valid JSON ({str(e)[:80]})") from None
-    if not isinstance(out, dict):
-        raise UntrustedFileError(f"{path}: a JSON object expected, got {type(out).__name__}")
-    return out
+        lines = data.decode("utf-8").splitlines()[comment_lines:]
+    except UnicodeDecodeError:
+        raise UntrustedFileError(f"{path}: not UTF-8 text") from None
+    try:
+        reader = csv.DictReader(lines)
+        missing = sorted(set(types) - set(reader.fieldnames or []))
+        if missing:
+            raise UntrustedFileError(f"{path}: no column {missing[0]!r}")
+        rows = []
+        for i, raw in enumerate(reader):
+            row = {}
+            for k, kind in types.items():
+                v = kind(raw[k])
+                if isinstance(v, float) and not np.isfinite(v):
+                    raise ValueError(f"{k} = {raw[k]!r}")
+                row[k] = v
+            rows.append(row)
+    except (ValueError, TypeError, OverflowError, csv.Error) as e:
+        if isinstance(e, UntrustedFileError):
+            raise
+        raise UntrustedFileError(f"{path}: row {len(rows) + 2 + comment_lines}: a malformed "
+                                 f"value ({str(e)[:60]})") from None  # fmt: skip
+    return rows
 
 
 # ------------------------------------------------------------------------- npz
-def _npy_header(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> tuple[tuple, np.dtype]:
-    """Shape and dtype of one .npy member, read from its header alone."""
-    with zf.open(info) as fh:
-        version = np.lib.format.read_magic(fh)
-        if version == (1, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-        elif version == (2, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-        else:
-            raise ValueError(f"npy version {version}")
-    if fortran:
+MAX_NPY_HEADER = 4096
+"""Largest .npy header parsed (ours are 128 bytes); read by the project's own code."""
+_NPY_DTYPES = {"<f8": np.float64, "<f4": np.float32, "<i8": np.int64, "<i4": np.int32}
+
+
+def _npy_array(fh, name: str, max_bytes: int) -> tuple[np.ndarray, int]:
+    """One .npy stream parsed by length-checked code: magic, a bounded header, exact data.
+
+    numpy's own reader is never called: it would read a header of any declared length first.
+    Only little-endian float64/float32/int64/int32 in C order are accepted. Returns the
+    array and the bytes its header and data take.
+    """
+    magic = fh.read(8)
+    if len(magic) != 8 or magic[:6] != b"\x93NUMPY" or magic[6] not in (1, 2, 3):
+        raise ValueError("not an npy array")
+    width = 2 if magic[6] == 1 else 4
+    raw = fh.read(width)
+    if len(raw) != width:
+        raise ValueError("truncated header")
+    (n,) = struct.unpack("<H" if width == 2 else "<I", raw)
+    if n > MAX_NPY_HEADER:
+        raise ValueError(f"a header of {n} bytes (at most {MAX_NPY_HEADER})")
+    text = fh.read(n)
+    if len(text) != n:
+        raise ValueError("truncated header")
+    try:
+        header = ast.literal_eval(text.decode("latin1").strip())
+    except (ValueError, SyntaxError, RecursionError, MemoryError, UnicodeDecodeError):
+        raise ValueError("a malformed header") from None
+    if not isinstance(header, dict) or set(header) != {"descr", "fortran_order", "shape"}:
+        raise ValueError("a malformed header")
+    descr, fortran, shape = header["descr"], header["fortran_order"], header["shape"]
+    if not isinstance(descr, str) or descr not in _NPY_DTYPES:
+        raise ValueError(f"dtype {str(descr)[:20]!r} (plain little-endian numbers only)")
+    if fortran is not False:
         raise ValueError("Fortran order")
-    return shape, dtype
+    if not isinstance(shape, tuple) or len(shape) > 8 or not all(
+        isinstance(d, int) and not isinstance(d, bool) and 0 <= d < 2**40 for d in shape
+    ):
+        raise ValueError("a malformed shape")
+    dtype = np.dtype(_NPY_DTYPES[descr])
+    n_bytes = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    if n_bytes > max_bytes:
+        raise UntrustedFileError(f"{name} holds {n_bytes} bytes of data, more than {max_bytes}")
+    data = fh.read(n_bytes)
+    if len(data) != n_bytes:
+        raise ValueError(f"{len(data)} bytes of data for {n_bytes}")
+    return np.frombuffer(data, dtype=dtype).reshape(shape), 8 + width + n + n_bytes
 
 
 def read_npz(
@@ -119,56 +185,66 @@ def read_npz(
     spec: dict[str, tuple[tuple[int | None, ...], str]],
     root: Path | None = None,
     max_bytes: int = MAX_NPZ_BYTES,
+    data: bytes | None = None,
 ) -> dict[str, np.ndarray]:
     """The arrays of an npz, each checked against ``spec`` before its data is read.
 
     ``spec``: member name -> (shape, dtype kind) with ``None`` for a free dimension and kind
     ``"f"`` (float) or ``"i"`` (integer). Missing or extra members, another shape or kind, a
-    stored size that does not match the header, a non-finite float and a pickled (object)
-    array are refused. Arrays come back as float64 / int64.
+    member stored encrypted or compressed by anything but deflate, a declared size that does
+    not match the header, a non-finite float and a pickled (object) array are refused.
+    ``data``: the file's bytes, already read (``path`` then only names it). Arrays come back
+    as float64 / int64.
     """
-    read_bytes(path, max_bytes, root)  # size, regular file, no symlink
+    if data is None:
+        data = read_bytes(path, max_bytes, root)  # size, regular file, no symlink
     out = {}
     try:
-        with zipfile.ZipFile(path) as zf:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
             infos = {i.filename.removesuffix(".npy"): i for i in zf.infolist()}
-            if set(infos) != set(spec):
+            if set(infos) != set(spec) or len(infos) != len(zf.infolist()):
                 raise UntrustedFileError(
-                    f"{path}: holds {sorted(infos)}, expected exactly {sorted(spec)}"
+                    f"{path}: holds {sorted(infos)[:8]}, expected exactly {sorted(spec)}"
                 )
             for name, (shape, kind) in spec.items():
                 info = infos[name]
+                if info.flag_bits & 0x1 or info.compress_type not in (
+                    zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED
+                ):
+                    raise UntrustedFileError(f"{path}: {name} is encrypted or oddly compressed")
+                if info.file_size > max_bytes + MAX_NPY_HEADER + 16:
+                    raise UntrustedFileError(
+                        f"{path}: {name} declares {info.file_size} bytes, more than {max_bytes}"
+                    )
                 try:
-                    got, dtype = _npy_header(zf, info)
+                    with zf.open(info) as fh:
+                        arr, used = _npy_array(fh, f"{path}: {name}", max_bytes)
+                    if info.file_size != used:
+                        raise UntrustedFileError(
+                            f"{path}: {name} stores {info.file_size} bytes for {used}"
+                        )
                 except ValueError as e:
+                    if isinstance(e, UntrustedFileError):
+                        raise
                     raise UntrustedFileError(
                         f"{path}: {name} is no plain npy array ({e})"
                     ) from None
+                got = arr.shape
                 ok = len(got) == len(shape) and all(
                     w is None or w == g for w, g in zip(shape, got, strict=True)
                 )
-                if not ok or dtype.kind != kind or dtype.hasobject:
+                if not ok or arr.dtype.kind != kind:
                     raise UntrustedFileError(
-                        f"{path}: {name} is {dtype} {got}, expected kind {kind!r} shape "
+                        f"{path}: {name} is {arr.dtype} {got}, expected kind {kind!r} shape "
                         f"{tuple('any' if w is None else w for w in shape)}"
                     )
-                n_bytes = int(np.prod(got, dtype=np.int64)) * dtype.itemsize
-                if n_bytes > max_bytes:
-                    raise UntrustedFileError(
-                        f"{path}: {name} holds {n_bytes} bytes of data, more than {max_bytes}"
-                    )
-                if info.file_size > n_bytes + 4096:
-                    raise UntrustedFileError(
-                        f"{path}: {name} stores {info.file_size} bytes for {n_bytes} of data"
-                    )
-                with zf.open(info) as fh:
-                    arr = np.lib.format.read_array(fh, allow_pickle=False)
                 arr = arr.astype(np.float64 if kind == "f" else np.int64)
                 if kind == "f" and not np.all(np.isfinite(arr)):
                     raise UntrustedFileError(f"{path}: {name} holds NaN or inf")
                 out[name] = arr
-    except (zipfile.BadZipFile, EOFError, OSError) as e:
-        raise UntrustedFileError(f"{path}: not a valid npz ({e})") from None
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError,
+            NotImplementedError, RuntimeError) as e:  # fmt: skip
+        raise UntrustedFileError(f"{path}: not a valid npz ({str(e)[:80]})") from None
     return out
 
 
@@ -176,42 +252,45 @@ def read_npz(
 _ST_DTYPES = {"F32": 4, "F64": 8, "F16": 2, "BF16": 2, "I64": 8, "I32": 4}
 
 
-def safetensors_shapes(path: Path, root: Path | None = None) -> dict[str, tuple[int, ...]]:
-    """Tensor shapes from a safetensors file's header, checked against the file's size.
+def safetensors_header(
+    path: Path, root: Path | None = None, data: bytes | None = None
+) -> tuple[dict[str, tuple[int, ...]], dict[str, str]]:
+    """(tensor shapes, metadata) from a safetensors file's header, checked against its size.
 
     Reads only the header (no tensor is allocated). Refuses a header over
-    :data:`MAX_HEADER_BYTES`, a file over :data:`MAX_WEIGHTS_BYTES`, an unknown dtype, and
-    offsets that do not tile the data exactly.
+    :data:`MAX_HEADER_BYTES`, a file over :data:`MAX_WEIGHTS_BYTES`, an unknown dtype,
+    offsets that do not tile the data exactly and metadata that is not a table of strings.
+    ``data``: the file's bytes, already read.
     """
-    path = Path(path)
-    if root is not None:
-        inside(root, path)
-    if path.is_symlink() or not path.is_file():
-        raise UntrustedFileError(f"{path}: missing (or not a regular file)")
-    size = path.stat().st_size
+    if data is None:
+        data = read_bytes(path, MAX_WEIGHTS_BYTES, root)
+    size = len(data)
     if size > MAX_WEIGHTS_BYTES:
         raise UntrustedFileError(f"{path}: {size} bytes, more than {MAX_WEIGHTS_BYTES} allowed")
-    with open(path, "rb") as fh:
-        raw = fh.read(8)
-        if len(raw) < 8:
-            raise UntrustedFileError(f"{path}: truncated (no safetensors header)")
-        (n,) = struct.unpack("<Q", raw)
-        if n > min(MAX_HEADER_BYTES, size - 8):
-            raise UntrustedFileError(f"{path}: header of {n} bytes in a {size}-byte file")
-        try:
-            header = json.loads(fh.read(n))
-        except ValueError:
-            raise UntrustedFileError(f"{path}: the safetensors header is not JSON") from None
+    if size < 8:
+        raise UntrustedFileError(f"{path}: truncated (no safetensors header)")
+    (n,) = struct.unpack("<Q", data[:8])
+    if n > min(MAX_HEADER_BYTES, size - 8):
+        raise UntrustedFileError(f"{path}: header of {n} bytes in a {size}-byte file")
+    try:
+        header = json.loads(data[8 : 8 + n].decode("utf-8"))
+    except (ValueError, RecursionError):
+        raise UntrustedFileError(f"{path}: the safetensors header is not JSON") from None
     if not isinstance(header, dict):
         raise UntrustedFileError(f"{path}: the safetensors header is not a JSON object")
+    meta = header.get("__metadata__", {})
+    if not isinstance(meta, dict) or not all(isinstance(v, str) for v in meta.values()):
+        raise UntrustedFileError(f"{path}: the safetensors metadata is not a table of strings")
     shapes, spans = {}, []
     for name, entry in header.items():
         if name == "__metadata__":
             continue
         try:
             dtype, shape, (a, b) = entry["dtype"], tuple(entry["shape"]), entry["data_offsets"]
-            ok = dtype in _ST_DTYPES and all(isinstance(d, int) and d >= 0 for d in shape)
-            ok = ok and b - a == int(np.prod(shape, dtype=np.int64)) * _ST_DTYPES[dtype]
+            ok = dtype in _ST_DTYPES and all(
+                type(d) is int and 0 <= d < 2**40 for d in (*shape, a, b)
+            ) and set(entry) == {"dtype", "shape", "data_offsets"}
+            ok = ok and b - a == int(np.prod(shape, dtype=np.float64)) * _ST_DTYPES[dtype]
         except (TypeError, KeyError, ValueError):
             ok = False
         if not ok:
@@ -226,112 +305,140 @@ def safetensors_shapes(path: Path, root: Path | None = None) -> dict[str, tuple[
         end = b
     if 8 + n + end != size:
         raise UntrustedFileError(f"{path}: {size} bytes, the header describes {8 + n + end}")
-    return shapes
+    return shapes, dict(meta)
 
 
-# ------------------------------------------------------------------------- manifests
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+def safetensors_shapes(path: Path, root: Path | None = None) -> dict[str, tuple[int, ...]]:
+    """Tensor shapes from a safetensors file's header (:func:`safetensors_header`)."""
+    return safetensors_header(path, root)[0]
 
 
-def write_manifest(where: Path) -> None:
-    """Record every file of ``where`` (size, SHA-256) in its manifest, written last."""
+def load_safetensors(path: Path, data: bytes) -> dict[str, Any]:
+    """The tensors of a safetensors file's bytes (header checked first; torch tensors)."""
+    safetensors_header(path, data=data)
+    from safetensors.torch import load
+
+    try:
+        return load(data)
+    except Exception as e:  # the Rust parser's own refusal (SafetensorError)
+        raise UntrustedFileError(f"{path}: refused by the safetensors parser ({e})") from None
+
+
+# ------------------------------------------------------------------------- snapshots
+class Snapshot:
+    """A snapshot's files read once into memory, each checked against the manifest's hash.
+
+    Everything a load parses comes from :attr:`files`, so a snapshot replaced while it is
+    loaded gives the old files or the new ones, never a mix.
+    """
+
+    def __init__(self, path: Path, files: dict[str, bytes]):
+        self.path, self.files = Path(path), files
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.files
+
+    def name(self, name: str) -> Path:
+        return self.path / name
+
+    def json(self, name: str) -> dict[str, Any]:
+        return parse_json_object(self.files[name], self.path / name)
+
+
+def parse_json_object(data: bytes, path: Path) -> dict[str, Any]:
+    """A JSON object from bytes (standard JSON: NaN and Infinity refused)."""
+
+    def no_constant(c):
+        raise ValueError(f"{c} is not JSON")
+
+    try:
+        out = json.loads(data.decode("utf-8"), parse_constant=no_constant)
+    except (UnicodeDecodeError, ValueError, RecursionError) as e:
+        raise UntrustedFileError(f"{path}: not valid JSON ({str(e)[:80]})") from None
+    if not isinstance(out, dict):
+        raise UntrustedFileError(f"{path}: a JSON object expected, got {type(out).__name__}")
+    return out
+
+
+def _read_in(dir_fd: int | None, name: str, path: Path, limit: int) -> bytes:
+    import stat as st_
+
+    try:
+        fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
+                     dir_fd=dir_fd)  # fmt: skip
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: missing") from None
+    except OSError as e:
+        why = "a symlink" if e.errno == errno.ELOOP else f"not a regular file ({e.strerror})"
+        raise UntrustedFileError(f"{path}: {why}") from None
+    try:
+        st = os.fstat(fd)
+        if not st_.S_ISREG(st.st_mode):
+            raise UntrustedFileError(f"{path}: not a regular file")
+        if st.st_size > limit:
+            raise UntrustedFileError(f"{path}: {st.st_size} bytes, more than {limit} allowed")
+        with os.fdopen(os.dup(fd), "rb") as fh:
+            return fh.read(limit + 1)[:limit]
+    finally:
+        os.close(fd)
+
+
+def read_snapshot(where: Path) -> Snapshot:
+    """Every file of a snapshot directory, read once through one descriptor and hashed.
+
+    Raises FileNotFoundError (no such snapshot, or no manifest: incomplete) or
+    :class:`UntrustedFileError` (a link, an odd file, a size or hash that differs from the
+    manifest, a file the manifest does not list).
+    """
     where = Path(where)
-    files = sorted(p for p in where.iterdir() if p.is_file() and p.name != MANIFEST_FILE)
-    entries = {p.name: {"bytes": p.stat().st_size, "sha256": _sha256(p)} for p in files}
-    tmp = where / (MANIFEST_FILE + ".tmp")
-    tmp.write_text(json.dumps(entries, indent=1, sort_keys=True) + "\n")
-    with open(tmp, "rb") as fh:
-        os.fsync(fh.fileno())
-    tmp.rename(where / MANIFEST_FILE)
+    try:
+        dfd = os.open(where, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{where}: missing") from None
+    except OSError as e:
+        raise UntrustedFileError(f"{where}: not a directory (or a symlink: {e.strerror})") from None
+    try:
+        entries = parse_json_object(
+            _read_in(dfd, MANIFEST_FILE, where / MANIFEST_FILE, MAX_TEXT_BYTES),
+            where / MANIFEST_FILE,
+        )
+        names = set(os.listdir(dfd)) - {MANIFEST_FILE}
+        if names != set(entries):
+            extra = sorted(names ^ set(entries))[:3]
+            raise UntrustedFileError(f"{where}: its files differ from its manifest's ({extra})")
+        if len(entries) > 16:
+            raise UntrustedFileError(f"{where}: {len(entries)} files (a snapshot has at most 16)")
+        files, total = {}, 0
+        for name, meta in entries.items():
+            p = where / name
+            if not isinstance(meta, dict) or not isinstance(meta.get("bytes"), int):
+                raise UntrustedFileError(f"{p}: a malformed manifest entry")
+            if "/" in name or name in (".", ".."):
+                raise UntrustedFileError(f"{p}: not a plain file name")
+            total += meta["bytes"]
+            if meta["bytes"] > MAX_WEIGHTS_BYTES or total > MAX_NPZ_BYTES:
+                raise UntrustedFileError(f"{p}: the manifest declares more than allowed")
+            data = _read_in(dfd, name, p, meta["bytes"])
+            if len(data) != meta["bytes"]:
+                raise UntrustedFileError(f"{p}: {len(data)} bytes, the manifest says "
+                                         f"{meta['bytes']}")  # fmt: skip
+            if hashlib.sha256(data).hexdigest() != meta.get("sha256"):
+                raise UntrustedFileError(f"{p}: its SHA-256 differs from the manifest's")
+            files[name] = data
+    finally:
+        os.close(dfd)
+    return Snapshot(where, files)
 
 
 def verify_manifest(where: Path) -> str | None:
-    """None when ``where`` holds exactly its manifest's files, intact; else what is wrong."""
+    """None when ``where`` is a complete, intact snapshot; else what is wrong ("missing")."""
     where = Path(where)
-    if where.is_symlink() or not where.is_dir():
+    if not os.path.lexists(where):
         return "missing"
     try:
-        entries = read_json_object(where / MANIFEST_FILE)
+        read_snapshot(where)
+    except FileNotFoundError as e:
+        return "missing" if str(e).endswith(f"{where}: missing") else str(e)
     except UntrustedFileError as e:
         return str(e)
-    for name, meta in entries.items():
-        p = where / name
-        if "/" in name or p.is_symlink() or not p.is_file() or not isinstance(meta, dict):
-            return f"{p}: missing"
-        if p.stat().st_size != meta.get("bytes"):
-            return f"{p}: {p.stat().st_size} bytes, the manifest says {meta.get('bytes')}"
-        if _sha256(p) != meta.get("sha256"):
-            return f"{p}: its SHA-256 differs from the manifest's"
     return None
-
-
-# ------------------------------------------------------------------------- outputs
-@contextlib.contextmanager
-def atomic_output(out: Path) -> Iterator[Path]:
-    """Write a whole output directory or nothing: yields a fresh temporary directory to fill.
-
-    The directory is created beside ``out`` (same file system) with a private name; on
-    success it replaces ``out`` (an older ``out`` is removed only after the rename), on any
-    exception or interrupt it is deleted, leaving the old ``out`` as it was. ``out`` must not
-    be a symlink; nothing inside the temporary directory existed before, so no write follows
-    a link planted by someone else.
-    """
-    out = Path(out)
-    if out.is_symlink():
-        raise UntrustedFileError(f"{out}: a symlink; give a real directory as the output")
-    if out.exists() and not out.is_dir():
-        raise UntrustedFileError(f"{out}: exists and is not a directory")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-    try:
-        yield tmp
-        old = None
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-            out.rename(old / "x")
-        tmp.rename(out)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-# ------------------------------------------------------------------------- lock
-class RunLock:
-    """An exclusive lock on a run directory (``RUN/.lock``, ``flock``): one writer at a time.
-
-    The kernel releases it when the holder exits, however it exits (SIGKILL included), so a
-    stale lock never blocks a resume. A second writer is refused with the holder's pid.
-    """
-
-    def __init__(self, run: Path):
-        self.path = Path(run) / ".lock"
-        self.fd: int | None = None
-
-    def __enter__(self) -> RunLock:
-        if self.path.is_symlink():
-            raise UntrustedFileError(f"{self.path}: a symlink")
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
-            os.close(fd)
-            raise UntrustedFileError(
-                f"{self.path.parent}: in use by {holder}; one writer at a time"
-            ) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode(), 0)
-        self.fd = fd
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self.fd is not None:
-            os.close(self.fd)  # releases the flock
-            self.fd = None
