@@ -10,7 +10,7 @@ Scene (a): model 1 alone (stance foot flat), Table 2's model-1 torques, 1 s from
 posture at rest, integrated without guards. Reference: RK4 at h = 0.01 ms.
 Scene (b): the hybrid simulator through model 2 -> 3 -> 4 (heel strike with impact, foot flat
 with impact and chain renumbering) from a hand-built model-2 state, zero torque, 0.3 s.
-A strict walking step has not been found yet (README, Reproducing Table 2), so this partial
+A strict walking step has not been found yet (docs/table2.md), so this partial
 cycle is the cleanest two-impact scene. Scene (c): the optimised open-loop table
 (training/configs/open_loop_optimised.toml), a complete cycle 1 -> 2 -> 3 -> 4 -> 1 (and the next
 1 -> 2) in 2.04 s. Reference (b, c): RK4 with 400 substeps per 20 ms, located events.

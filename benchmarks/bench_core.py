@@ -11,7 +11,6 @@ Also checks M and the bias against Pinocchio (printed, not asserted).
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -24,6 +23,7 @@ from biped_constraint_env.kinematics import point_bias_acceleration, point_jacob
 from biped_constraint_env.model import paper_biped
 from biped_constraint_env.simulator import DEFAULT_OPTIONS, FAST_OPTIONS, SimState, step
 from biped_constraint_env.state import MAX_EVENTS, N_FST
+from training.plumbing.common import CliParser, command, int_in
 
 
 def _timeit(fn, n: int, repeats: int = 5) -> float:
@@ -46,9 +46,10 @@ def _solve_loop(ch, sc, mode, q, qd, tau6, n):
     return acc
 
 
+@command("bench_core")
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=20000, help="calls per timing")
+    ap = CliParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int_in(1, 10_000_000), default=20000, help="calls per timing")
     args = ap.parse_args(argv)
     params = paper_biped()
     chain = params.chain(0)

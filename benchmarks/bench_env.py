@@ -25,7 +25,6 @@ from rest at the rest pose until the swing foot lands (``--pd-only``: these rows
 
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
@@ -33,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import biped_constraint_env  # noqa: F401  (registers ConstrainedBiped-v0)
+from training.plumbing.common import CliParser, command
 
 ACTION_FRACTION = 0.05  # random actions at 5% of the bound: episodes last tens of steps
 
@@ -203,8 +203,9 @@ def pd_cost(rounds: int) -> None:
     print(f"  PD every 1 ms / 20 ms torques: {pd1 / t20:.2f} (finer servo, no target)")
 
 
+@command("bench_env")
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=5000, help="env.step calls per timing")
     ap.add_argument("--num-envs", type=int, default=256, help="sub-environments of the vector envs")
     ap.add_argument(

@@ -36,6 +36,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from training.plumbing.common import CliParser, command
 
 DEFAULT_CONFIG = "training/configs/ppo_from_scratch.toml"
 

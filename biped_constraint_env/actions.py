@@ -40,6 +40,10 @@ PCFG_NSUB, PCFG_LIMIT, PCFG_RANGE, PCFG_KP, PCFG_KD = 0, 1, 2, 3, 3 + N_ACTUATED
 torque bound [N m], the targets' half-range [rad], Kp (5), Kd (5)."""
 
 
+MIN_PD_DT_S = 5e-4
+"""Shortest PD update period accepted [s] (each update is at least one integration step)."""
+
+
 def check_pd_dt(pd_dt, dt: float) -> int:
     """PD updates per control period for ``pd_dt`` [s] (None: :data:`PD_DT_S`, at most dt).
 
@@ -47,7 +51,7 @@ def check_pd_dt(pd_dt, dt: float) -> int:
     """
     if pd_dt is None:
         pd_dt = min(PD_DT_S, dt)
-    pd_dt = check_real("pd_dt", pd_dt, 0.0, dt, low_open=True, unit=" [s]")
+    pd_dt = check_real("pd_dt", pd_dt, min(MIN_PD_DT_S, dt), dt, unit=" [s]")
     n = round(dt / pd_dt)
     if n < 1 or abs(n * pd_dt - dt) > 1e-9 * dt:
         raise ValueError(f"pd_dt must divide the control period dt = {dt} s, got {pd_dt}")

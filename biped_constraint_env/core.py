@@ -35,7 +35,7 @@ from .rewards import (
 from .settings import EnvSettings
 from .simulator import SimState, evaluate
 from .starts import check_start_state, draw_starts, start_slots
-from .state import FS_T, ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
+from .state import FS_ROOT, FS_T, ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
 from .tracking import Tracking
 
 BASE_INFO_KEYS = ("mode", "stance_side", "steps_completed", "t", "hip_y", "switches", "events",
@@ -280,6 +280,7 @@ class EnvCore:
             switches, events = event_infos(events) if events else ((), ())
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
                    "t": sim.fst.item(row, FS_T), "hip_y": self.hip.item(row, 0),
+                   "root_y": sim.fst.item(row, FS_ROOT),
                    "switches": switches, "events": events,
                    "termination_reason": self._reasons[row]}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms[row].tolist(), strict=True))
@@ -293,6 +294,7 @@ class EnvCore:
             mode, side, steps = sim.ist[:, :3].T.copy()  # ST_MODE, ST_SIDE, ST_STEPS: 0, 1, 2
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
                    "t": sim.fst[:, FS_T].copy(), "hip_y": self.hip[:, 0].copy(),
+                   "root_y": sim.fst[:, FS_ROOT].copy(),
                    "switches": switches, "events": events,
                    "termination_reason": self._reasons.copy()}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms.T.copy(), strict=True))

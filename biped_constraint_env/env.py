@@ -33,7 +33,7 @@ class ConstrainedBipedEnv(gym.Env):
     swing foot; 5 kg in all) in the vertical y-z plane, rooted at the stance toe. Its motion
     switches among the paper's four models (1: stance foot flat; 2: stance toe pivot; 3: toe
     + swing heel; 4: new stance foot flat + old toe), each with its own unknowns, solved by
-    the Newton-Euler method with the contacts as constraints (README, Model). One walking step
+    the Newton-Euler method with the contacts as constraints (docs/conventions.md). One walking step
     is the cycle 1 -> 2 -> 3 -> 4 -> 1; the legs swap roles at 3 -> 4. The agent applies the
     five joint torques and should walk forward (+y) as far as it can without leaving the four
     models. Conventions (angles, signs): docs/conventions.md.
@@ -289,7 +289,7 @@ class ConstrainedBipedEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode (see the class docstring, Starting State)."""
         if seed is not None:
-            check_seeds(seed, 1)  # an int >= 0: not a float, a bool or a list
+            seed = check_seeds(seed, 1)[0]  # an int >= 0 (numpy's too): not a float or a list
         super().reset(seed=seed)
         self._needs_reset = True  # stays so if this reset is refused
         rngs = self._rngs = [self.np_random]  # this episode's generator (seeded above)

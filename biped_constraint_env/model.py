@@ -92,7 +92,7 @@ PAPER_LINKS: tuple[LinkParams, ...] = (_FOOT, _LEG, _LEG, _LEG, _LEG, _FOOT)
 """Paper Table 1 / section 4: m, l, r, D for links 0, 1, 2, 3, 4, E."""
 
 DEFAULT_FRICTION_RATIO = 0.5
-"""Sliding friction ratio K = f_t / f_n (chosen; the paper gives no value: README, Model)."""
+"""Sliding friction ratio K = f_t / f_n (chosen; the paper gives no value: docs/conventions.md)."""
 
 
 @dataclass(frozen=True)

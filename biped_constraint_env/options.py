@@ -52,7 +52,7 @@ _REAL_OPTION_RANGES = {
 
 @dataclass(frozen=True)
 class SimOptions:
-    """Numerical and modelling options of the simulator (see README, Model).
+    """Numerical and modelling options of the simulator (see docs/conventions.md).
 
     Attributes:
         integrator: ``"euler"``, ``"semi_implicit"``, ``"rk2"``, ``"rk4"``, ``"limex"``
@@ -157,7 +157,7 @@ in the walking task), located events, exact J-dot, strict checks, plastic impact
 heel/toe split of the flat stance foot with the foot's weight included (the exact ground
 reaction, so that F_L <= 0 agrees with the model-2 dynamics). The cheapest setting of the
 accuracy study meeting <= 1e-3 rad and <= 1 ms switch-time error over both walking scenes
-(README, Speed and accuracy), at about 700 evaluations per simulated second."""
+(docs/speed_accuracy.md), at about 700 evaluations per simulated second."""
 
 FIXED_STEP_OPTIONS = DEFAULT_OPTIONS.replace(integrator="rk4_limex", substeps=8)
 """RK4_LIMEX x 8 fixed substeps per 20 ms (2.5 ms): the cheapest fixed-step setting meeting the

@@ -107,8 +107,10 @@ def check_perturbation_settings(
         raise ValueError("push_impulse_ns needs exactly one of push_interval_s and push_at_s")
     if imp is None and (interval is not None or at is not None):
         raise ValueError("push_interval_s / push_at_s need push_impulse_ns")
-    noise = _range("obs_noise", obs_noise, 0.0, 10.0)
+    noise = None
     if obs_noise is not None:  # (angle std, rate std), not a range
+        if not isinstance(obs_noise, list | tuple) or len(obs_noise) != 2:
+            raise ValueError(f"obs_noise must be None or (angle std, rate std), got {obs_noise!r}")
         noise = (check_real("obs_noise", obs_noise[0], 0.0, 1.0, unit=" [rad]"),
                  check_real("obs_noise", obs_noise[1], 0.0, 100.0, unit=" [rad/s]"))  # fmt: skip
     return PerturbationSettings(

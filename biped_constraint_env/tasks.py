@@ -75,6 +75,16 @@ MAX_EPISODE_STEPS = 6000
 
 MAX_DT_S = 1.0
 """Longest control period accepted [s] (the paper's is 20 ms)."""
+MIN_DT_S = 1e-3
+"""Shortest control period accepted [s]: 30,000 periods in a 30 s episode."""
+MIN_STEP_S = 5e-5
+"""Shortest fixed integration step an env accepts [s] (``dt / substeps``): 600,000 steps in
+30 s. The simulator itself accepts finer steps (the accuracy study's references)."""
+MIN_STEP_TOL = 1e-8
+"""Smallest ``step_tol`` an env accepts (error-controlled steps of about 1 ms at the default
+walk; the simulator accepts down to 1e-10 for references)."""
+MIN_EVENT_TOL = 1e-12
+"""Smallest ``pos_tol_m`` [m] and ``time_tol_s`` [s] an env accepts."""
 
 
 def resolve_task(task: str, **overrides: Any) -> dict[str, Any]:
@@ -91,11 +101,27 @@ def resolve_options(preset: str, dt: float, overrides: dict[str, Any]) -> SimOpt
     they are scaled so that the substep is never longer than the preset's (x 8 per 20 ms is
     x 2 per 5 ms, 2.5 ms substeps; the default's x 1 per 20 ms is x 1 per 5 ms). An explicit
     ``substeps`` is per period, as given.
+
+    Every setting that scales the work is bounded here, so that a 30 s episode costs seconds,
+    not days: ``dt`` in [:data:`MIN_DT_S`, :data:`MAX_DT_S`], integration steps no shorter
+    than :data:`MIN_STEP_S`, ``step_tol`` >= :data:`MIN_STEP_TOL`, event tolerances >=
+    :data:`MIN_EVENT_TOL`.
     """
     check_choice("preset", preset, sorted(PRESETS))
-    dt = check_real("dt", dt, 0.0, MAX_DT_S, low_open=True, unit=" [s]")
+    dt = check_real("dt", dt, MIN_DT_S, MAX_DT_S, unit=" [s]")
     base = PRESETS[preset]
     changes = {k: v for k, v in overrides.items() if v is not None}
     if "substeps" not in changes:
         changes["substeps"] = max(1, math.ceil(base.substeps * dt / PAPER_SAMPLE_TIME_S - 1e-9))
-    return base.replace(**changes)
+    opts = base.replace(**changes)
+    most = max(1, int(dt / MIN_STEP_S + 1e-9))
+    if opts.substeps > most:
+        raise ValueError(f"substeps must be at most {most} at dt = {dt} s (steps of at least "
+                         f"{MIN_STEP_S * 1e6:g} us), got {opts.substeps}")  # fmt: skip
+    if opts.step_tol < MIN_STEP_TOL:
+        raise ValueError(f"step_tol must be at least {MIN_STEP_TOL:g}, got {opts.step_tol!r}")
+    for name in ("pos_tol_m", "time_tol_s"):
+        if getattr(opts, name) < MIN_EVENT_TOL:
+            raise ValueError(f"{name} must be at least {MIN_EVENT_TOL:g}, got "
+                             f"{getattr(opts, name)!r}")  # fmt: skip
+    return opts

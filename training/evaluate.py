@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from biped_constraint_env.tasks import MAX_DT_S, MIN_DT_S
 from training.plumbing.common import CliParser, command, float_in, int_in
 from training.plumbing.outputs import command_output, write_file
 from training.plumbing.safe_files import UntrustedFileError
@@ -56,7 +57,7 @@ from training.rollouts import (
     summarize,
     table_row,
 )
-from training.stats import EPISODE_S, MIN_STEPS
+from training.stats import EPISODE_S, MIN_STEPS, format_success
 
 GIF_MAX_FRAMES = 500
 MIN_STEPS_FROM_REST = MIN_STEPS
@@ -122,7 +123,8 @@ def figures(actor, cfg, seed_best: int, seed_worst: int, eps_by_seed: dict, out_
             frames[: 15 * 50],  # the first 15 s
             out_dir / "figures" / f"{name}_strip.png",
             f"{name} episode (seed {seed}): {e['steps_completed']} steps, "
-            f"{e['distance_m']:.2f} m (first 15 s)",
+            f"{e['distance_m']:.2f} m in {e['t_s']:.1f} s, {e['end'].replace('_', ' ')}; "
+            f"shown: the first {min(15.0, e['t_s']):.1f} s",
             every=max(min(len(frames), 750) // 30, 1),
         )
 
@@ -176,7 +178,8 @@ def controller_batch(spec: str, n: int):
 def batched_row(label: str, act, env_kw: dict, seeds, env_id: str, rest: bool = False) -> dict:
     """A row of ``seeds`` episodes run at once in the batched env (initiation from rest)."""
     t0 = time.time()
-    row = summarize(label, run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S))
+    eps = run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S, progress=label)
+    row = summarize(label, eps)
     if rest:
         row["initiation"] = initiation(row["episodes"], MIN_STEPS_FROM_REST)
     print(f"{table_row(row)} ({time.time() - t0:.0f} s)", flush=True)
@@ -266,7 +269,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="episode start (default: the config's; mid-stride for a policy trained on both)",
     )
     ap.add_argument(
-        "--dt", type=float_in(1e-4, 0.1), default=None, help="control period [s] (default: config)"
+        "--dt", type=float_in(MIN_DT_S, MAX_DT_S), default=None,
+        help="control period [s] (default: config)"
     )
     ap.add_argument("--hold", action="store_true", help="hold each action through model switches")
     ap.add_argument("--compare", action="store_true", help="also run the baselines and stresses")
@@ -333,7 +337,7 @@ def _controller_loop(args) -> dict:
 
     controller_from(args.controller)  # refuses an unknown name here
     PPOConfig(teacher=args.controller).check_untrusted()  # shipped names only
-    cfg = PPOConfig(start="mixed")
+    cfg = PPOConfig(env={"start": "mixed"})
     return {"cfg": cfg, "label": f"model controller ({args.controller!r})", "policy": None,
             "what": "a model controller"}  # fmt: skip
 
@@ -405,7 +409,8 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     write_file(out_dir / "evaluation.json", json_text(summary))
     print(
         f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "
-        f"{cfg.env_id} {cfg.env_kwargs().get('task', '')} task, {start} start, strict physics; "
+        f"{cfg.env_id} {cfg.env_kwargs().get('task') or 'walk'} task, {start} start, strict "
+        f"physics; "
         f"in the loop: {in_the_loop}:"
     )
     print(TABLE_HEADER)
@@ -420,7 +425,8 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
         for r in init:
             i = r["initiation"]
             print(
-                f"| {r['controller']} | {i['success_rate']:.0%} | {i['t_first_step_s_mean']:.2f}, "
+                f"| {r['controller']} | {format_success(r['success'])} | "
+                f"{i['t_first_step_s_mean']:.2f}, "
                 f"{i['t_first_step_s_max']:.2f} | {i['first_step_m_mean']:.2f} | "
                 f"{i['steps_to_90pct_speed_mean']:.1f}, {i['steps_to_90pct_speed_max']} |"
             )

@@ -117,6 +117,10 @@ class PPOConfig:
         if bool(self.curriculum_env) != (self.curriculum_steps > 0):
             raise ValueError("--curriculum-steps and [curriculum_env] go together: "
                              "give both or neither")  # fmt: skip
+        for table in ("env", "train_env", "curriculum_env"):
+            if "render_mode" in getattr(self, table):
+                raise ValueError(f"[{table}] render_mode is not a setting of a config (the "
+                                 f"commands render their own figures)")  # fmt: skip
         # shipped references only: a config names no file
         for table in ("env", "train_env", "curriculum_env"):
             ref = getattr(self, table).get("reference")

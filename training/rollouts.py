@@ -115,6 +115,7 @@ def run_episodes_batched(
     env_id: str = "ConstrainedBiped-v0",
     num_threads: int = 1,
     episode_s: float | None = None,
+    progress: str | None = None,
 ) -> list[dict]:
     """:func:`run_episodes`' episodes, all at once in the batched vector env.
 
@@ -124,7 +125,7 @@ def run_episodes_batched(
     compiled simulator), so the per-episode steps, distance, return and end equal
     :func:`run_episodes`' for a controller that gives the same torques batched as alone. It
     costs about one episode's wall time instead of one per seed; it records the steps' times
-    and hip positions, not the torque cost or the first step's length, and the cost of
+    and hip positions, the first step's length (not the torque cost), and the cost of
     transport: the positive and negative joint work
     sum(|tau q-dot|) dt (the torques of each period, the rates at its end) per weight and
     distance [1] (``cost_of_transport``; NaN for an episode that did not move forward).
@@ -152,7 +153,11 @@ def run_episodes_batched(
     pushes: list[list[float]] = [[] for _ in seeds]
     step_t: list[list[float]] = [[] for _ in seeds]
     step_hip: list[list[float]] = [[] for _ in seeds]
+    first_m = np.full(len(seeds), math.nan)
+    bar = _period_bar(venv, progress)
     while live.any():
+        if bar is not None:
+            bar.update(1)
         tau = np.asarray(act(obs), dtype=np.float64)
         tau[~live] = 0.0  # finished episodes autoreset on this step; their action is ignored
         obs, r, term, trunc, info = venv.step(tau)
@@ -165,6 +170,8 @@ def run_episodes_batched(
             for i in np.flatnonzero(live & (info["push_dv_m_s"] != 0.0)):
                 pushes[i].append(float(info["push_dv_m_s"][i]))
         for i in np.flatnonzero(live & (info["steps_completed"] > steps)):
+            if steps[i] == 0:  # the new stance toe's advance over the start's [m]
+                first_m[i] = float(info["root_y"][i])
             steps[i] = info["steps_completed"][i]
             step_t[i].append(float(info["t"][i]))
             step_hip[i].append(float(info["hip_y"][i] - y0[i]))
@@ -172,15 +179,30 @@ def run_episodes_batched(
             live[i] = False
             final[i] = {k: info[k][i] for k in ("steps_completed", "hip_y", "t")}
             final[i]["end"] = info["termination_reason"][i] or "time_limit"
+    if bar is not None:
+        bar.close()
     params = venv.unwrapped.params
     venv.close()
     weight = params.total_mass_kg * params.gravity_mps2
     return [_batched_episode(int(seed), final[i], float(y0[i]), float(ret[i]), work[i] / weight,
-                             step_t[i], step_hip[i], pushes[i])
+                             step_t[i], step_hip[i], pushes[i], first_m[i])
             for i, seed in enumerate(seeds)]  # fmt: skip
 
 
-def _batched_episode(seed, f, y0, ret, work_per_weight, step_t, step_hip, pushes) -> dict:
+def _period_bar(venv, desc: str | None):
+    """A progress bar over the episodes' control periods (their time limit), or None."""
+    total = getattr(venv.unwrapped, "max_episode_steps", None)
+    if desc is None or not total:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, desc=desc[:40], unit=" periods", mininterval=1.0, leave=False)
+
+
+def _batched_episode(seed, f, y0, ret, work_per_weight, step_t, step_hip, pushes,
+                     first_m=math.nan) -> dict:  # fmt: skip
     """One episode's record of :func:`run_episodes_batched` (``f``: its last info)."""
     dist = float(f["hip_y"] - y0)
     return {
@@ -194,7 +216,7 @@ def _batched_episode(seed, f, y0, ret, work_per_weight, step_t, step_hip, pushes
         "cost_of_transport": float(work_per_weight / dist) if dist > 0 else math.nan,
         "step_t_s": step_t,
         "step_hip_y_m": step_hip,
-        "first_step_m": math.nan,  # (the single env's run_episodes measures it)
+        "first_step_m": None if math.isnan(first_m) else float(first_m),
         "push_dv_m_s": pushes,  # the hip's velocity change of each push
     }
 

@@ -150,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         ap.error(
             "Ray Tune is not installed: pip install -e '.[distributed]' (in an environment of "
-            "its own: Ray RLlib pins an older Gymnasium; README, Distributed training)"
+            "its own: Ray RLlib pins an older Gymnasium; docs/distributed.md)"
         )
     name = a.name or f"sweep_{a.config.stem}"
     if not name.replace("-", "").replace("_", "").replace(".", "").isalnum() or name[0] == ".":

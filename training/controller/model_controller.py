@@ -27,8 +27,8 @@ The contact forces are exact (the simulator's own Newton-Euler solve), so the to
 keep the contacts legal at the sample; between samples the torque is held. With the paper's
 20 ms period and torques held through a model switch that is not enough (a torque chosen for
 model 3 acts on other joints after the 3 -> 4 renumbering): the controller is meant for the env
-with ``stop_at_switch=True`` and a short period (``dt=0.005``). README, "Learning to walk
-further", reports what it does.
+with ``stop_at_switch=True`` and a short period (``dt=0.005``). docs/walking.md reports what
+it does.
 """
 
 from __future__ import annotations

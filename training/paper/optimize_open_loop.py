@@ -115,11 +115,12 @@ def score_population(X: np.ndarray, cfg: OptimiseConfig):
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
-def search(cfg: OptimiseConfig, seed: int, show: bool, label: str = ""):
+def search(cfg: OptimiseConfig, seed: int, show: bool, label: str = "", bar=None):
     """One CMA-ES search; returns ((score, candidate, steps), history).
 
     ``label`` names the search in the progress bar (e.g. "restart 2/3"), which also shows
-    the best score and steps so far.
+    the best score and steps so far. ``bar``: a tqdm bar over the whole job (every restart's
+    iterations, so its ETA is the job's) to advance; else one of this search's own.
     """
     import cma
 
@@ -136,8 +137,12 @@ def search(cfg: OptimiseConfig, seed: int, show: bool, label: str = ""):
     )
     best = (-np.inf, None, 0)
     history = []
-    bar = progress(range(cfg.iterations), cfg.iterations, label or f"search {seed}", show)
-    for it in bar:
+    own = bar is None
+    if own:
+        bar = progress(range(cfg.iterations), cfg.iterations, label or f"search {seed}", show)
+    elif hasattr(bar, "set_description"):
+        bar.set_description(label or f"search {seed}")
+    for it in bar if own else range(cfg.iterations):
         Z = np.array(es.ask())
         X = mu + sd * Z
         X[:, :20] = np.clip(X[:, :20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)
@@ -149,6 +154,8 @@ def search(cfg: OptimiseConfig, seed: int, show: bool, label: str = ""):
             if hasattr(bar, "set_postfix"):
                 bar.set_postfix(best=f"{best[0]:.2f}", steps=best[2], refresh=False)
         history.append((it, float(s.max()), int(steps.max())))
+        if not own and hasattr(bar, "update"):
+            bar.update(1)
     return best, history
 
 
@@ -181,19 +188,41 @@ def robustness(cfg, seeds: int = 10) -> tuple[dict, list[int]]:
     return exact, [r["steps_completed"] for r in noisy]
 
 
-@command("optimize_open_loop")
+_RUN: list[Path] = []
+
+
+def _interrupted() -> str:
+    if not _RUN:
+        return "nothing was written"
+    return f"{_RUN[0]} is incomplete (INCOMPLETE.txt says how far it got); run the command again"
+
+
+def _job_bar(cfg: OptimiseConfig):
+    """One progress bar over every restart's iterations (None without tqdm or progress)."""
+    if not cfg.progress:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=cfg.restarts * cfg.iterations, unit=" iterations", mininterval=1.0)
+
+
+@command("optimize_open_loop", _interrupted)
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the searches and write the best table."""
     cfg = parse_config(OptimiseConfig, argv, __doc__.splitlines()[0])
     connect(cfg.ray, cfg.ray_address)
     rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv).path
+    _RUN[:] = [rd]
     print(f"run directory: {rd}")
     results = []
+    bar = _job_bar(cfg)
     try:
         for r in range(cfg.restarts):
             label = f"restart {r + 1}/{cfg.restarts} (seed {cfg.seed + r})"
             print(f"{label}: CMA-ES, {cfg.iterations} iterations", flush=True)
-            best, history = search(cfg, cfg.seed + r, cfg.progress, label)
+            best, history = search(cfg, cfg.seed + r, cfg.progress, label, bar)
             results.append(
                 {
                     "seed": cfg.seed + r,
@@ -204,8 +233,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                 }
             )
             print(f"search {cfg.seed + r}: best score {best[0]:.2f}, {best[2]} steps", flush=True)
+    except KeyboardInterrupt:
+        write_file(rd / "INCOMPLETE.txt", f"interrupted after {len(results)} of {cfg.restarts} "
+                   "searches; no best_open_loop.toml was written\n")  # fmt: skip
+        raise
     finally:
         shutdown()
+        if bar is not None:
+            bar.close()
     top = max(results, key=lambda d: d["score"])
     x = np.array(top["x"])
     x[:20] = np.clip(x[:20], -TORQUE_LIMIT_NM, TORQUE_LIMIT_NM)

@@ -52,11 +52,13 @@ def _coerce(kind: Any, value: Any, name: str) -> Any:
             raise ValueError(f"{name} must be an integer, got {value!r}")
         try:
             out = kind(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ValueError(f"{name} must be {'an integer' if kind is int else 'a number'}, "
-                             f"got {value!r}") from None  # fmt: skip
+                             f"got {str(value)[:40]!r}") from None  # fmt: skip
         if kind is float and not math.isfinite(out):
-            raise ValueError(f"{name} must be finite, got {value!r}")
+            raise ValueError(f"{name} must be finite, got {str(value)[:40]!r}")
+        if kind is int and not -(2**63) <= out < 2**63:
+            raise ValueError(f"{name} must be a 64-bit integer, got {str(value)[:40]!r}")
         return out
     if kind is str:
         if not isinstance(value, str):

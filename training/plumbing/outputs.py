@@ -461,7 +461,7 @@ def command_output(
                 out.remove(name)  # a killed command's staging: ours by its name and kind
         if WHOLE not in owned:
             foreign = [rel for rel in _listing(out) if rel != MARKER and rel not in owned
-                       and not (rel.endswith("/") and any(k.startswith(rel) for k in owned))]
+                       and not rel.endswith("/")]  # an empty folder holds nothing to protect
             if foreign:
                 more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
                 raise OutputError(

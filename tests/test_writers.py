@@ -1,0 +1,662 @@
+"""Every command writes only its own output (docs/policy_files.md, "What a command touches").
+
+Each case plants what a hostile run directory or a careless ``--out`` would hold (links to a
+victim file outside, FIFOs, foreign folders, crafted counters) and checks that the command
+refuses in one line (a ``SystemExit`` of status 2) or handles it safely, and that the victim
+is unchanged and nothing outside the named output was created, appended to or deleted.
+"""
+
+from __future__ import annotations
+
+import bz2
+import csv
+import errno
+import json
+import math
+import os
+import shutil
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+import tracemalloc
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from training import evaluate, train_ppo
+from training.plumbing.outputs import MARKER, OutDir, RunLock, command_output, write_file
+from training.plumbing.safe_files import UntrustedFileError, read_npz
+from training.policy_io import (
+    NORMALIZER_FILE,
+    OPTIMIZER_FILE,
+    STATE_FILE,
+    load_policy,
+    load_state,
+    write_manifest,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRATCH = ROOT / "policies" / "ppo_from_scratch"
+SMALL = ["--n-envs", "2", "--n-steps", "128", "--batch-size", "128", "--n-epochs", "1"]
+SMALL += ["--eval-episodes", "1", "--progress", "false"]
+VICTIM_TEXT = "precious\n"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_NUM_THREADS": "1"}
+
+
+@pytest.fixture
+def victim(tmp_path):
+    """A file outside every output, whose bytes must never change."""
+    path = tmp_path / "outside" / "victim.txt"
+    path.parent.mkdir()
+    path.write_text(VICTIM_TEXT)
+    return path
+
+
+def _untouched(victim: Path) -> None:
+    assert victim.read_text() == VICTIM_TEXT
+    assert sorted(p.name for p in victim.parent.iterdir()) == ["victim.txt"]
+
+
+def _one_line_refusal(excinfo, *words: str) -> None:
+    msg = str(excinfo.value)
+    assert excinfo.value.code == 2, msg
+    assert "\n" not in msg and "Traceback" not in msg, msg
+    for w in words:
+        assert w in msg, msg
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory):
+    """A small finished run with a checkpoint (the thing a resume reads)."""
+    out = tmp_path_factory.mktemp("trained")
+    args = SMALL + ["--out-dir", str(out), "--total-timesteps", "512", "--checkpoint-freq", "256"]
+    assert train_ppo.main(args + ["--eval-freq", "256"]) == 0
+    (run,) = (out / "train_ppo").iterdir()
+    return run
+
+
+@pytest.fixture
+def run(trained_run, tmp_path):
+    """A copy of the small run to tamper with."""
+    dst = tmp_path / "run"
+    shutil.copytree(trained_run, dst)
+    (dst / ".lock").unlink(missing_ok=True)
+    return dst
+
+
+# ------------------------------------------------------------------ 1, 3, 8: resume
+def test_resume_never_writes_through_a_planted_config_tmp_link(run, victim):
+    """Finding 1: ``RUN/config.toml.tmp`` -> victim; the README's extend command."""
+    (run / "config.toml.tmp").symlink_to(victim)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--total-timesteps", "1024", "--progress", "false"])
+    _one_line_refusal(e, "config.toml.tmp", "symlink")
+    _untouched(victim)
+
+
+@pytest.mark.parametrize(
+    "plant",
+    [
+        "checkpoints",  # the whole checkpoint folder linked outside
+        "training_time.txt",
+        "eval.csv",
+        "figures",
+        "tb",
+        "512.monitor.csv",  # a dangling link where the next session's monitor goes
+        "checkpoints/latest/policy.safetensors",
+    ],
+)
+def test_resume_refuses_a_link_anywhere_in_the_run(run, victim, plant):
+    """Finding 3: every link in the run is refused before anything is read or written."""
+    target = run / plant
+    if target.is_dir():
+        shutil.rmtree(target)
+    else:
+        target.unlink(missing_ok=True)
+    if plant.endswith("monitor.csv"):
+        target.symlink_to(victim.parent / "created_by_the_monitor.csv")  # dangling
+    elif plant in ("checkpoints", "figures", "tb"):
+        target.symlink_to(victim.parent)
+    else:
+        target.symlink_to(victim)
+    before = sorted(str(p.relative_to(run)) for p in run.rglob("*"))
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--total-timesteps", "1024", "--progress", "false"])
+    _one_line_refusal(e, "symlink")
+    _untouched(victim)
+    after = sorted(str(p.relative_to(run)) for p in run.rglob("*"))
+    assert set(after) - set(before) <= {".lock"}  # nothing else written
+
+
+@pytest.mark.parametrize("kind", ["fifo", "dir", "link", "hardlink"])
+def test_resume_refuses_an_odd_lock_or_file(run, victim, kind):
+    lock = run / ".lock"
+    if kind == "fifo":
+        os.mkfifo(lock)
+    elif kind == "dir":
+        lock.mkdir()
+    elif kind == "link":
+        lock.symlink_to(victim)
+    else:  # a hard link to the victim (same file system): appending would change it
+        os.link(victim, run / "training_time2.txt")
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, ".lock" if kind != "hardlink" else "hard links")
+    _untouched(victim) if kind != "hardlink" else None
+    assert victim.read_text() == VICTIM_TEXT
+
+
+def test_a_refused_second_writer_changes_nothing(run):
+    """Finding 8: the lock comes first, so a refused resume has not rewritten config.toml."""
+    before = (run / "config.toml").read_bytes()
+    with OutDir.open(run) as d, RunLock(d):
+        with pytest.raises(SystemExit) as e:
+            train_ppo.main(["--resume", str(run), "--total-timesteps", "99999"])
+        _one_line_refusal(e, "in use by pid")
+    assert (run / "config.toml").read_bytes() == before
+
+
+def test_a_monitor_linked_to_dev_zero_is_refused(run):
+    (run / "0.monitor.csv").unlink()
+    (run / "0.monitor.csv").symlink_to("/dev/zero")
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, "0.monitor.csv", "symlink")
+
+
+# ------------------------------------------------------------------ 6, 12: counters and state
+def _reseal(where: Path) -> None:
+    write_manifest(where)
+
+
+def _state(run: Path, **changes) -> None:
+    path = run / "checkpoints" / "latest" / STATE_FILE
+    st = json.loads(path.read_text())
+    st.update(changes)
+    path.write_text(json.dumps(st))
+    _reseal(path.parent)
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"num_timesteps": 10**23}, "num_timesteps must be an integer in"),
+        ({"num_timesteps": -1}, "num_timesteps must be an integer in"),
+        ({"wall_s": -5}, "wall_s"),
+    ],
+)
+def test_resume_checks_the_checkpoints_counters(run, changes, match):
+    _state(run, **changes)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, match)
+
+
+def test_a_nan_score_is_refused(run):
+    path = run / "checkpoints" / "latest" / STATE_FILE
+    path.write_text(path.read_text().replace('"best": ', '"best": NaN, "x": '))
+    _reseal(path.parent)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, "not valid JSON", "NaN")
+
+
+def _optimizer_meta(run: Path, edit) -> None:
+    from safetensors.torch import load_file, save_file
+    from safetensors import safe_open
+
+    path = run / "checkpoints" / "latest" / OPTIMIZER_FILE
+    with safe_open(str(path), framework="pt") as fh:
+        meta = fh.metadata()
+    tensors = load_file(str(path))
+    groups = json.loads(meta["param_groups"])
+    edit(groups, tensors)
+    meta["param_groups"] = json.dumps(groups)
+    save_file(tensors, str(path), metadata=meta)
+    _reseal(path.parent)
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (lambda g, t: g[0].update(maximize=True), "maximize"),
+        (lambda g, t: g[0].update(eps=-1.0), "eps"),
+        (lambda g, t: g[0].update(lr=5.0), "lr must be in"),
+        (lambda g, t: t.update({k: -abs(v) - 1 for k, v in t.items() if "exp_avg_sq" in k}),
+         "negative second moment"),
+    ],
+)
+def test_crafted_optimizer_state_is_refused(run, edit, match):
+    """Finding 6: ``maximize = true`` would make Adam ascend; ``eps = -1`` divide by ~0."""
+    _optimizer_meta(run, edit)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, match)
+
+
+@pytest.mark.parametrize(("key", "value"), [("ret_var", -1.0), ("ret_count", -5.0)])
+def test_a_negative_return_statistic_is_refused(run, key, value):
+    path = run / "checkpoints" / "latest" / NORMALIZER_FILE
+    with np.load(path) as z:
+        d = {k: z[k] for k in z.files}
+    d[key] = np.float64(value)
+    np.savez(path, **d)
+    _reseal(path.parent)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, f"{key} is negative")
+
+
+def test_imitation_counters_are_checked(tmp_path):
+    """Finding 6: an imitation checkpoint's round is range-checked (round = -10^6 looped)."""
+    from training.ppo_config import PPOConfig
+
+    cfg = PPOConfig(teacher="model", bc_rounds=3)
+    where = tmp_path / "ckpt"
+    where.mkdir()
+    (where / STATE_FILE).write_text(json.dumps({"round": -1000000, "seed": 1, "rows": [],
+                                                "rng": {}, "wall_s": 0}))  # fmt: skip
+    write_manifest(where)
+    with pytest.raises(UntrustedFileError, match="round must be an integer in"):
+        train_ppo._resume_imitation(cfg, where, None, np.random.default_rng(0))
+
+
+# ------------------------------------------------------------------ 10: kills and eval rows
+def _start(args: list[str]) -> subprocess.Popen:
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    return subprocess.Popen([sys.executable, "-m", "training.train_ppo", *args], cwd=ROOT,
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+
+
+def test_a_kill_campaign_leaves_exactly_the_final_runs_evaluations(tmp_path):
+    """Ten random SIGKILL / SIGINT of one run, each resumed: every evaluation once, in order."""
+    rng = np.random.default_rng(1)
+    total, every = 12_288, 1024
+    args = SMALL + ["--out-dir", str(tmp_path), "--total-timesteps", str(total)]
+    args += ["--checkpoint-freq", "256", "--eval-freq", str(every)]
+    proc = _start(args)
+    t0 = time.time()
+    while not list(tmp_path.glob("train_ppo/*/checkpoints/latest/" + STATE_FILE)):
+        assert proc.poll() is None, proc.stderr.read().decode()[-2000:]
+        assert time.time() - t0 < 300
+        time.sleep(0.05)
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    kills = 0
+    while kills < 10:
+        time.sleep(rng.uniform(0.5, 4.0))
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGKILL if rng.random() < 0.5 else signal.SIGINT)
+            kills += 1
+        proc.wait()
+        err = proc.stderr.read().decode()
+        proc.stderr.close()
+        assert "Traceback" not in err, err[-3000:]
+        proc = _start(["--resume", str(run), "--progress", "false"])
+    proc.wait(timeout=600)
+    proc.stderr.close()
+    if load_state(run / "checkpoints" / "latest")["num_timesteps"] < total or not (
+        run / "final"
+    ).exists():
+        assert train_ppo.main(["--resume", str(run), "--progress", "false"]) == 0
+    with open(run / "eval.csv") as fh:
+        steps = [int(r["env_steps"]) for r in csv.DictReader(fh)]
+    assert steps == list(range(every, total + 1, every))
+
+
+# ------------------------------------------------------------------ 2, 7: --out folders
+def test_evaluate_out_never_deletes_a_policy_folder(tmp_path):
+    """Finding 2: ``--out policies`` removed all six committed policies."""
+    policies = tmp_path / "policies"
+    shutil.copytree(SCRATCH, policies / "ppo_from_scratch", ignore=shutil.ignore_patterns("fig*"))
+    before = sorted(str(p) for p in policies.rglob("*"))
+    for out in (policies, policies / "ppo_from_scratch", policies / "ppo_from_scratch" / "final"):
+        with pytest.raises(SystemExit) as e:
+            evaluate.main([str(policies / "ppo_from_scratch"), "--episodes", "1", "--out",
+                           str(out)])  # fmt: skip
+        _one_line_refusal(e, "no command of this package wrote there")
+    assert sorted(str(p) for p in policies.rglob("*")) == before
+
+
+def test_an_output_replaces_only_its_own_files(tmp_path, victim):
+    out = tmp_path / "out"
+    with command_output(out, "cmd_a") as co:
+        co.dir().write("a.json", "1")
+        co.dir("figures").write("a.png", "x")
+    with command_output(out, "cmd_b") as co:  # another command beside it
+        co.dir().write("b.json", "2")
+    with command_output(out, "cmd_a") as co:  # the same command again: replaces its own
+        co.dir().write("a.json", "3")
+    assert (out / "a.json").read_text() == "3" and (out / "b.json").read_text() == "2"
+    assert not (out / "figures" / "a.png").exists()  # its stale file of the earlier run
+    (out / "user_notes.txt").write_text("mine")
+    with pytest.raises(UntrustedFileError, match="user_notes.txt"), command_output(out, "cmd_a"):
+        pass
+    (out / "user_notes.txt").unlink()
+    (out / "b.json").unlink()
+    (out / "b.json").symlink_to(victim)
+    with pytest.raises(UntrustedFileError, match="symlink"), command_output(out, "cmd_b"):
+        pass
+    _untouched(victim)
+
+
+def test_an_interrupted_command_leaves_no_partial_file(tmp_path):
+    """Finding 7: a kill left a 0-byte PNG beside the old JSON; staging makes it all or none."""
+    out = tmp_path / "out"
+    with command_output(out, "bench") as co:
+        co.dir().write("result.json", "old")
+    with pytest.raises(KeyboardInterrupt), command_output(out, "bench") as co:
+        co.dir().write("figure.png", "half")
+        raise KeyboardInterrupt
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "result.json"]
+    assert (out / "result.json").read_text() == "old"
+
+
+@pytest.mark.parametrize("module", ["benchmarks.failure_modes", "benchmarks.accuracy"])
+def test_benchmarks_refuse_a_foreign_or_linked_out(tmp_path, victim, module):
+    link = tmp_path / "link"
+    link.symlink_to(victim.parent)
+    for out in (link, victim.parent):
+        p = subprocess.run([sys.executable, "-m", module, "--out", str(out)], cwd=tmp_path,
+                           capture_output=True, text=True, timeout=300, env=ENV)  # fmt: skip
+        assert p.returncode == 2, p.stderr[-2000:]
+        assert "Traceback" not in p.stderr and len(p.stderr.strip().splitlines()) <= 2
+    _untouched(victim)
+
+
+def test_write_file_replaces_a_link_instead_of_following_it(tmp_path, victim):
+    (tmp_path / "compare.json").symlink_to(victim)
+    write_file(tmp_path / "compare.json", "{}")
+    assert (tmp_path / "compare.json").read_text() == "{}" and not (
+        tmp_path / "compare.json"
+    ).is_symlink()
+    _untouched(victim)
+
+
+# ------------------------------------------------------------------ 4, 11: bounded parsing
+def _npy_v2_header_claiming(n_bytes: int) -> bytes:
+    header = "{'descr': '<f8', 'fortran_order': False, 'shape': (%d,), }" % (n_bytes // 8)
+    header = header.ljust(1 << 30, " ")[:4096]  # a long header (numpy would read 1 GiB)
+    return b"\x93NUMPY\x02\x00" + struct.pack("<I", 1 << 30) + header.encode()
+
+
+def test_a_bzip2_npy_header_bomb_is_refused_in_bounded_memory(tmp_path):
+    """Finding 4: a 3.7 KB normalizer.npz whose v2 header claims 1 GiB took 2.5 GB."""
+    raw = b"\x93NUMPY\x02\x00" + struct.pack("<I", 1 << 30) + b" " * (1 << 24)
+    path = tmp_path / "normalizer.npz"
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_BZIP2) as zf:
+        zf.writestr("obs_mean.npy", raw)
+    assert path.stat().st_size < 20_000
+    tracemalloc.start()
+    with pytest.raises(UntrustedFileError, match="oddly compressed|header of"):
+        read_npz(path, {"obs_mean": ((None,), "f")})
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 50 << 20
+
+
+def test_a_deflated_npy_header_bomb_is_refused_by_its_length(tmp_path):
+    raw = b"\x93NUMPY\x02\x00" + struct.pack("<I", 1 << 30) + b" " * (1 << 22)
+    path = tmp_path / "x.npz"
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("a.npy", raw)
+    with pytest.raises(UntrustedFileError, match="a header of 1073741824 bytes"):
+        read_npz(path, {"a": ((None,), "f")})
+
+
+def test_an_encrypted_member_is_refused(tmp_path):
+    path = tmp_path / "x.npz"
+    np.savez(path, a=np.zeros(2))
+    data = bytearray(path.read_bytes())
+    for sig in (b"PK\x03\x04", b"PK\x01\x02"):  # the flag bits of both headers
+        i = data.find(sig)
+        off = i + (6 if sig == b"PK\x03\x04" else 8)
+        data[off] |= 1
+    path.write_bytes(bytes(data))
+    with pytest.raises(UntrustedFileError, match="encrypted|not a valid npz"):
+        read_npz(path, {"a": ((2,), "f")})
+
+
+def test_a_safetensors_file_the_rust_parser_refuses_is_one_line(tmp_path, monkeypatch):
+    """Whatever the Rust parser refuses after the Python header check passed is one line."""
+    import safetensors.torch
+    from safetensors import SafetensorError
+
+    from training.plumbing.safe_files import load_safetensors
+
+    def refuse(_data):
+        raise SafetensorError("Error while deserializing header: InvalidHeader")
+
+    monkeypatch.setattr(safetensors.torch, "load", refuse)
+    header = json.dumps({"a": {"dtype": "F32", "shape": [1], "data_offsets": [0, 4]}}).encode()
+    data = struct.pack("<Q", len(header)) + header + b"\0\0\0\0"
+    with pytest.raises(UntrustedFileError, match="refused by the safetensors parser"):
+        load_safetensors(tmp_path / "p.safetensors", data)
+    header = b'{"a": {"dtype": "F32", "shape": [1], "data_offsets": [0.0, 4.0]}}'
+    data = struct.pack("<Q", len(header)) + header + b"\0\0\0\0"
+    with pytest.raises(UntrustedFileError, match="malformed header entry"):
+        load_safetensors(tmp_path / "p.safetensors", data)
+
+
+@pytest.mark.parametrize(
+    ("toml", "match"),
+    [
+        ("learning_rate = 1" + "0" * 400 + ".0\n", "must be finite"),
+        ("total_timesteps = 1" + "0" * 400 + "\n", "64-bit integer"),
+        ("x = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
+        ("[env]\nrender_mode = \"human\"\n", "render_mode is not a setting"),
+        ("[env]\ndt = 1e-9\n", "dt must be"),
+        ("[env]\nsubsteps = 100000\n", "substeps must be at most"),
+        ("[env]\nstep_tol = 1e-10\n", "step_tol must be at least"),
+        ("[env]\naction = {kind = \"pd\", dt = 1e-9}\n", "pd_dt must be"),
+    ],
+)
+def test_costly_or_malformed_configs_are_one_line(tmp_path, toml, match):
+    """Findings 5 and 11: a config may not set days of work, nor crash the parser."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(toml)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--config", str(cfg), "--out-dir", str(tmp_path / "runs")])
+    _one_line_refusal(e, match)
+    assert not (tmp_path / "runs").exists()
+
+
+def test_the_cli_and_the_config_share_the_control_period_bound():
+    from biped_constraint_env.tasks import MIN_DT_S
+
+    with pytest.raises(SystemExit) as e:
+        evaluate.main([str(SCRATCH), "--dt", str(MIN_DT_S / 2)])
+    _one_line_refusal(e, "--dt")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["training.compare_runs", str(SCRATCH), "--which", "nope"],
+        ["training.policy_io", "import-sb3", "missing.zip", "--vecnormalize", "m.pkl", "--out",
+         "o"],
+        ["benchmarks.bench_core", "--n", "0"],
+        ["training.evaluate", "no/such/run"],
+        ["training.train_ppo", "--resume", "no/such/run"],
+    ],
+)
+def test_refusals_are_one_line_with_status_2(tmp_path, argv):
+    p = subprocess.run([sys.executable, "-m", *argv], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300, env=ENV)  # fmt: skip
+    assert p.returncode == 2, p.stderr[-2000:]
+    lines = [ln for ln in p.stderr.splitlines() if "error" in ln]
+    assert len(lines) == 1 and "Traceback" not in p.stderr, p.stderr[-2000:]
+    assert list(tmp_path.iterdir()) == []
+
+
+def _can_mount(tmp_path: Path) -> bool:
+    probe = tmp_path / "probe"
+    probe.mkdir()
+    ok = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(probe)],
+                        capture_output=True).returncode == 0  # fmt: skip
+    if ok:
+        subprocess.run(["umount", str(probe)], check=True)
+    probe.rmdir()
+    return ok
+
+
+@pytest.mark.parametrize("how", ["full", "read-only"])
+def test_a_full_or_read_only_disk_is_one_line(tmp_path, how):
+    if not shutil.which("mount") or not _can_mount(tmp_path):
+        pytest.skip("this machine cannot mount a tmpfs here (needs root and mount rights)")
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    opts = "size=16k" if how == "full" else "size=1m,ro"
+    subprocess.run(["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(disk)], check=True)
+    try:
+        p = subprocess.run(
+            [sys.executable, "-m", "training.compare_runs", str(SCRATCH), "--which", "final",
+             "--episodes", "1", "--out", str(disk / "rows.json"), "--curves",
+             str(disk / "curves.png")],
+            cwd=tmp_path, capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert p.returncode == 2, p.stderr[-2000:]
+        assert "Traceback" not in p.stderr
+        assert ("disk is full" if how == "full" else "read-only") in p.stderr.lower()
+        assert [x.name for x in disk.iterdir()] == []  # no 0-byte .partial left
+    finally:
+        subprocess.run(["umount", str(disk)], check=True)
+
+
+# ------------------------------------------------------------------ 9: a load during a replacement
+def test_a_load_during_a_replacement_never_mixes_two_snapshots(tmp_path):
+    """Finding 9: a snapshot replaced while it loads gives the old files or the new ones."""
+    import torch
+
+    from training.policy_io import build_policy, read_config, save_snapshot
+
+    run = tmp_path / "run"
+    shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best"))
+    cfg = read_config(run)
+    policy = build_policy(cfg)
+
+    class Norm:  # the VecNormalize fields save_normalizer reads
+        def __init__(self, v):
+            self.obs_rms = type("R", (), {"mean": np.full(cfg.obs_dim(), v),
+                                          "var": np.ones(cfg.obs_dim()), "count": 1.0})()
+            self.ret_rms = type("R", (), {"mean": 0.0, "var": 1.0, "count": 1.0})()
+            self.norm_obs, self.norm_reward, self.clip_obs, self.clip_reward = True, True, 10.0, 10.0
+            self.gamma, self.epsilon = 0.99, 1e-8
+
+    versions = []
+    for v in (1.0, 2.0):
+        with torch.no_grad():
+            for p in policy.parameters():
+                p.fill_(v)
+        versions.append((policy.state_dict()["action_net.bias"][0].item(), Norm(v)))
+        save_snapshot(run / f"v{int(v)}", policy, {"num_timesteps": int(v)}, Norm(v))
+    stop = threading.Event()
+
+    def writer():
+        k = 0
+        while not stop.is_set():
+            shutil.rmtree(run / "final.tmp", ignore_errors=True)
+            shutil.copytree(run / f"v{1 + k % 2}", run / "final.tmp")
+            shutil.rmtree(run / "final.prev", ignore_errors=True)
+            os.rename(run / "final", run / "final.prev")
+            os.rename(run / "final.tmp", run / "final")
+            k += 1
+
+    shutil.rmtree(run / "final")
+    shutil.copytree(run / "v1", run / "final")
+    t = threading.Thread(target=writer)
+    t.start()
+    loads = 0
+    try:
+        t_end = time.time() + 8
+        while time.time() < t_end:
+            try:
+                pol, norm, _, state = load_policy(run, "final")
+            except (FileNotFoundError, UntrustedFileError):
+                continue
+            w = pol.state_dict()["action_net.bias"][0].item()
+            assert w == state["num_timesteps"] == norm.mean[0], (w, state, norm.mean[0])
+            loads += 1
+    finally:
+        stop.set()
+        t.join()
+    assert loads > 20
+
+
+# ------------------------------------------------------------------ 12-16: the newcomer's path
+def test_reset_takes_a_numpy_integer_seed():
+    import gymnasium as gym
+
+    env = gym.make("ConstrainedBiped-v0")
+    a, _ = env.reset(seed=np.int64(5))
+    b, _ = env.reset(seed=5)
+    assert np.array_equal(a, b)
+
+
+def test_the_documented_observation_noise_bound_holds():
+    import gymnasium as gym
+
+    gym.make("ConstrainedBiped-v0", perturbations={"obs_noise": (0.02, 50.0)})  # up to 100
+    with pytest.raises(ValueError, match="obs_noise"):
+        gym.make("ConstrainedBiped-v0", perturbations={"obs_noise": (0.02, 101.0)})
+
+
+def test_outputs_are_standard_json(tmp_path):
+    from training.policy_io import json_text
+
+    text = json_text({"a": math.nan, "b": [-math.inf, 1.0], "c": np.float64(2.0)})
+    assert json.loads(text, parse_constant=lambda c: pytest.fail(c)) == {
+        "a": None, "b": [None, 1.0], "c": 2.0}
+
+
+def test_the_help_example_of_evaluate_runs(tmp_path, capsys):
+    """Finding 13: ``--controller model:teacher_robust+start_rest --start rest`` crashed."""
+    out = tmp_path / "ev"
+    argv = ["--controller", "model:teacher_robust+start_rest", "--start", "rest",
+            "--episodes", "2", "--out", str(out)]  # fmt: skip
+    assert evaluate.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "walk task" in text and "ConstrainedBiped-v0  task" not in text
+    summary = json.loads((out / "evaluation.json").read_text())
+    init = summary["results"][0]["initiation"]
+    assert init["first_step_m_mean"] is None or math.isfinite(init["first_step_m_mean"])
+    assert "(2/2)" in text or "(1/2)" in text or "(0/2)" in text  # counts, not a rounded %
+
+
+def test_ctrl_c_before_the_first_snapshot_names_a_command_that_works(tmp_path, monkeypatch):
+    """Finding 14: Ctrl-C before a snapshot said "--resume RUN", which is then refused."""
+
+    def interrupt(*_a, **_k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(train_ppo, "training_env", interrupt)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(SMALL + ["--out-dir", str(tmp_path), "--total-timesteps", "256"])
+    assert e.value.code == 130
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    assert "holds no snapshot yet" in train_ppo._interrupted()
+    assert str(run) in train_ppo._interrupted()
+
+
+def test_messages_cite_pages_that_exist():
+    """Finding 16: messages and docstrings named README sections that do not exist."""
+    import re
+
+    bad = []
+    for path in [*ROOT.glob("biped_constraint_env/*.py"), *ROOT.glob("training/**/*.py"),
+                 *ROOT.glob("benchmarks/*.py")]:  # fmt: skip
+        text = path.read_text()
+        bad += [f"{path.name}: README, {m}" for m in re.findall(r"README, ([A-Z][\w ]+)", text)]
+        bad += [f"{path.name}: {m}" for m in re.findall(r"docs/[\w.]+\.md", text)
+                if not (ROOT / m).exists()]
+    assert bad == []
+
+
+def test_expected_errnos_are_named():
+    from training.plumbing.common import EXPECTED_ERRNOS
+
+    assert {errno.ENOSPC, errno.EROFS, errno.EACCES} <= set(EXPECTED_ERRNOS)
