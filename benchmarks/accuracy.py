@@ -602,9 +602,7 @@ def _run(quick: bool, out: Path) -> None:
     results = {}
     for name in progress(["a", "b", "c", "stability", "mujoco"], 5, "accuracy study"):
         if name == "a":
-            results["scene_a"], results["scene_a_reference_self_error_rad"] = scene_a(
-                params, quick
-            )
+            results["scene_a"], results["scene_a_reference_self_error_rad"] = scene_a(params, quick)
         elif name == "b":
             rows, sw, res = scene_b(params, quick)
             results["scene_b"], results["scene_b_reference_switches"] = rows, sw

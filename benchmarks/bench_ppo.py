@@ -36,7 +36,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from training.plumbing.common import CliParser, command
 
 DEFAULT_CONFIG = "training/configs/ppo_from_scratch.toml"
 

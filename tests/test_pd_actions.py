@@ -35,10 +35,11 @@ def _pd_run(dt: float, pd_dt: float, periods: int, action=ACTION) -> np.ndarray:
 
 
 def test_decimation_one_period_of_held_targets_is_many_short_ones():
-    """Targets held over 20 ms with the PD law every 1 ms are twenty 1 ms periods exactly;
-    with the law every 5 ms they stay close, while the PD torque held for 20 ms is far off."""
-    fine = _pd_run(0.001, 0.001, 20)
-    assert np.array_equal(_pd_run(0.02, 0.001, 1), fine)
+    """Targets held over 20 ms with the PD law every 2 ms are ten 2 ms periods exactly (2 ms:
+    the shortest control period an env accepts); with the law every 5 ms they stay close,
+    while the PD torque held for 20 ms is far off."""
+    fine = _pd_run(0.002, 0.002, 10)
+    assert np.array_equal(_pd_run(0.02, 0.002, 1), fine)
     physics_rate = np.abs(_pd_run(0.02, 0.005, 1) - fine).max()
     held = np.abs(_pd_run(0.02, 0.02, 1) - fine).max()
     assert physics_rate < held / 5, (physics_rate, held)

@@ -19,8 +19,7 @@ import numpy as np
 import pytest
 
 from training import train_ppo
-from training.policy_io import write_manifest
-from training.policy_io import STATE_FILE, find_snapshot, load_state
+from training.policy_io import STATE_FILE, find_snapshot, load_state, write_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--n-envs", "2", "--n-steps", "128", "--batch-size", "128", "--n-epochs", "1"]

@@ -373,7 +373,9 @@ def test_an_interrupted_evaluation_leaves_the_old_output(tmp_path, sig):
     assert proc.returncode != 0
     assert json.loads((out / "evaluation.json").read_text()) == {"old": True}
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".staging-")) == [
-        MARKER, "evaluation.json"]
+        MARKER,
+        "evaluation.json",
+    ]
     if sig == signal.SIGINT:  # an interrupt cleans its temporary folder up
         assert not list(out.glob(".staging-*"))
 
@@ -385,8 +387,8 @@ COMMANDS = [
     "training.paper.paper_numerics", "training.paper.table2_study",
     "training.controller.record_reference", "training.controller.tune",
     "training.controller.model_controller", "training.policy_io", "training.sweep",
-    "benchmarks.accuracy", "benchmarks.bench_core", "benchmarks.bench_env",
-    "benchmarks.bench_ppo", "benchmarks.failure_modes",
+    "benchmarks.accuracy", "benchmarks.bench_bounds", "benchmarks.bench_core",
+    "benchmarks.bench_env", "benchmarks.bench_ppo", "benchmarks.failure_modes",
 ]  # fmt: skip
 
 

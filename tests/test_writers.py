@@ -8,7 +8,6 @@ is unchanged and nothing outside the named output was created, appended to or de
 
 from __future__ import annotations
 
-import bz2
 import csv
 import errno
 import json
@@ -207,8 +206,8 @@ def test_a_nan_score_is_refused(run):
 
 
 def _optimizer_meta(run: Path, edit) -> None:
-    from safetensors.torch import load_file, save_file
     from safetensors import safe_open
+    from safetensors.torch import load_file, save_file
 
     path = run / "checkpoints" / "latest" / OPTIMIZER_FILE
     with safe_open(str(path), framework="pt") as fh:
@@ -227,8 +226,10 @@ def _optimizer_meta(run: Path, edit) -> None:
         (lambda g, t: g[0].update(maximize=True), "maximize"),
         (lambda g, t: g[0].update(eps=-1.0), "eps"),
         (lambda g, t: g[0].update(lr=5.0), "lr must be in"),
-        (lambda g, t: t.update({k: -abs(v) - 1 for k, v in t.items() if "exp_avg_sq" in k}),
-         "negative second moment"),
+        (
+            lambda g, t: t.update({k: -abs(v) - 1 for k, v in t.items() if "exp_avg_sq" in k}),
+            "negative second moment",
+        ),
     ],
 )
 def test_crafted_optimizer_state_is_refused(run, edit, match):
@@ -299,9 +300,10 @@ def test_a_kill_campaign_leaves_exactly_the_final_runs_evaluations(tmp_path):
         proc = _start(["--resume", str(run), "--progress", "false"])
     proc.wait(timeout=600)
     proc.stderr.close()
-    if load_state(run / "checkpoints" / "latest")["num_timesteps"] < total or not (
-        run / "final"
-    ).exists():
+    if (
+        load_state(run / "checkpoints" / "latest")["num_timesteps"] < total
+        or not (run / "final").exists()
+    ):
         assert train_ppo.main(["--resume", str(run), "--progress", "false"]) == 0
     with open(run / "eval.csv") as fh:
         steps = [int(r["env_steps"]) for r in csv.DictReader(fh)]
@@ -378,12 +380,6 @@ def test_write_file_replaces_a_link_instead_of_following_it(tmp_path, victim):
 
 
 # ------------------------------------------------------------------ 4, 11: bounded parsing
-def _npy_v2_header_claiming(n_bytes: int) -> bytes:
-    header = "{'descr': '<f8', 'fortran_order': False, 'shape': (%d,), }" % (n_bytes // 8)
-    header = header.ljust(1 << 30, " ")[:4096]  # a long header (numpy would read 1 GiB)
-    return b"\x93NUMPY\x02\x00" + struct.pack("<I", 1 << 30) + header.encode()
-
-
 def test_a_bzip2_npy_header_bomb_is_refused_in_bounded_memory(tmp_path):
     """Finding 4: a 3.7 KB normalizer.npz whose v2 header claims 1 GiB took 2.5 GB."""
     raw = b"\x93NUMPY\x02\x00" + struct.pack("<I", 1 << 30) + b" " * (1 << 24)
@@ -448,11 +444,11 @@ def test_a_safetensors_file_the_rust_parser_refuses_is_one_line(tmp_path, monkey
         ("learning_rate = 1" + "0" * 400 + ".0\n", "must be finite"),
         ("total_timesteps = 1" + "0" * 400 + "\n", "64-bit integer"),
         ("x = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
-        ("[env]\nrender_mode = \"human\"\n", "render_mode is not a setting"),
+        ('[env]\nrender_mode = "human"\n', "render_mode is not a setting"),
         ("[env]\ndt = 1e-9\n", "dt must be"),
         ("[env]\nsubsteps = 100000\n", "substeps must be at most"),
         ("[env]\nstep_tol = 1e-10\n", "step_tol must be at least"),
-        ("[env]\naction = {kind = \"pd\", dt = 1e-9}\n", "pd_dt must be"),
+        ('[env]\naction = {kind = "pd", dt = 1e-9}\n', "pd_dt must be"),
     ],
 )
 def test_costly_or_malformed_configs_are_one_line(tmp_path, toml, match):
@@ -477,8 +473,15 @@ def test_the_cli_and_the_config_share_the_control_period_bound():
     "argv",
     [
         ["training.compare_runs", str(SCRATCH), "--which", "nope"],
-        ["training.policy_io", "import-sb3", "missing.zip", "--vecnormalize", "m.pkl", "--out",
-         "o"],
+        [
+            "training.policy_io",
+            "import-sb3",
+            "missing.zip",
+            "--vecnormalize",
+            "m.pkl",
+            "--out",
+            "o",
+        ],
         ["benchmarks.bench_core", "--n", "0"],
         ["training.evaluate", "no/such/run"],
         ["training.train_ppo", "--resume", "no/such/run"],
@@ -541,10 +544,18 @@ def test_a_load_during_a_replacement_never_mixes_two_snapshots(tmp_path):
 
     class Norm:  # the VecNormalize fields save_normalizer reads
         def __init__(self, v):
-            self.obs_rms = type("R", (), {"mean": np.full(cfg.obs_dim(), v),
-                                          "var": np.ones(cfg.obs_dim()), "count": 1.0})()
+            self.obs_rms = type(
+                "R",
+                (),
+                {"mean": np.full(cfg.obs_dim(), v), "var": np.ones(cfg.obs_dim()), "count": 1.0},
+            )()
             self.ret_rms = type("R", (), {"mean": 0.0, "var": 1.0, "count": 1.0})()
-            self.norm_obs, self.norm_reward, self.clip_obs, self.clip_reward = True, True, 10.0, 10.0
+            self.norm_obs, self.norm_reward, self.clip_obs, self.clip_reward = (
+                True,
+                True,
+                10.0,
+                10.0,
+            )
             self.gamma, self.epsilon = 0.99, 1e-8
 
     versions = []
@@ -610,7 +621,10 @@ def test_outputs_are_standard_json(tmp_path):
 
     text = json_text({"a": math.nan, "b": [-math.inf, 1.0], "c": np.float64(2.0)})
     assert json.loads(text, parse_constant=lambda c: pytest.fail(c)) == {
-        "a": None, "b": [None, 1.0], "c": 2.0}
+        "a": None,
+        "b": [None, 1.0],
+        "c": 2.0,
+    }
 
 
 def test_the_help_example_of_evaluate_runs(tmp_path, capsys):
@@ -651,8 +665,11 @@ def test_messages_cite_pages_that_exist():
                  *ROOT.glob("benchmarks/*.py")]:  # fmt: skip
         text = path.read_text()
         bad += [f"{path.name}: README, {m}" for m in re.findall(r"README, ([A-Z][\w ]+)", text)]
-        bad += [f"{path.name}: {m}" for m in re.findall(r"docs/[\w.]+\.md", text)
-                if not (ROOT / m).exists()]
+        bad += [
+            f"{path.name}: {m}"
+            for m in re.findall(r"docs/[\w.]+\.md", text)
+            if not (ROOT / m).exists()
+        ]
     assert bad == []
 
 

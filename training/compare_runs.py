@@ -17,7 +17,6 @@ reference and the env do without a network).
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from dataclasses import asdict, replace
 from pathlib import Path

@@ -27,7 +27,6 @@ POLICY_DIR is unpickled (:mod:`training.policy_io`).
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import replace
@@ -269,8 +268,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="episode start (default: the config's; mid-stride for a policy trained on both)",
     )
     ap.add_argument(
-        "--dt", type=float_in(MIN_DT_S, MAX_DT_S), default=None,
-        help="control period [s] (default: config)"
+        "--dt",
+        type=float_in(MIN_DT_S, MAX_DT_S),
+        default=None,
+        help="control period [s] (default: config)",
     )
     ap.add_argument("--hold", action="store_true", help="hold each action through model switches")
     ap.add_argument("--compare", action="store_true", help="also run the baselines and stresses")

@@ -289,7 +289,9 @@ def load_weights(policy, where: Path | Snapshot) -> None:
     loaded_ptrs = {model_sd[k].data_ptr() for k in tensors}
     missing = [k for k in want if k not in tensors and model_sd[k].data_ptr() not in loaded_ptrs]
     if missing:
-        raise UntrustedFileError(f"{path}: does not match the config's network (lacks {missing[:3]})")
+        raise UntrustedFileError(
+            f"{path}: does not match the config's network (lacks {missing[:3]})"
+        )
     try:
         policy.load_state_dict(tensors, strict=False)
     except RuntimeError as e:
@@ -623,13 +625,13 @@ def import_sb3_zip(
 ) -> None:
     """Convert a Stable-Baselines3 ``model.zip`` (+ ``vecnormalize.pkl``) to a run directory.
 
-    ``out`` (an open output directory) receives ``config.toml`` (the network's architecture, read from the model, and
-    ``env``: the keyword arguments of the env it was trained in, ``[env]``) and the snapshot
-    ``final/``, so that ``python -m training.evaluate OUT`` runs it. The model's actions in
-    [-1, 1] are taken as ``make_sb3_vec_env`` maps them (torques / 150 N m; PD targets as they
-    are). The model's observation size must be that env's. This loads the SB3 files, which
-    unpickles them: it prints :data:`SB3_PICKLE_WARNING` first. Use it only on files you
-    trust; the directory it writes loads without pickle.
+    ``out`` (an open output directory) receives ``config.toml`` (the network's architecture,
+    read from the model, and ``env``: the keyword arguments of the env it was trained in,
+    ``[env]``) and the snapshot ``final/``, so that ``python -m training.evaluate OUT`` runs
+    it. The model's actions in [-1, 1] are taken as ``make_sb3_vec_env`` maps them (torques /
+    150 N m; PD targets as they are). The model's observation size must be that env's. This
+    loads the SB3 files, which unpickles them: it prints :data:`SB3_PICKLE_WARNING` first. Use
+    it only on files you trust; the directory it writes loads without pickle.
     """
     from dataclasses import replace
 

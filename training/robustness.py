@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
 from training.plumbing.outputs import save_figure
 
 PUSH_IMPULSES_NS = (0.25, 0.5, 1.0, 1.5)

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from training.plumbing.common import CliParser, command, int_in
-from training.plumbing.outputs import command_output, write_file
 from training.plumbing.distributed import connect, shutdown
+from training.plumbing.outputs import command_output, write_file
 
 METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
 

@@ -148,8 +148,10 @@ def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
             ckpt, model.policy, state, arrays={"data.npz": {"obs": data.obs, "act": data.act}}
         )
     handle = OutDir.open(run, create=False)
-    handle.append("training_time.txt",
-                  f"imitation: {len(data)} labelled env steps, {time.time() - t0:.0f} s wall\n")
+    handle.append(
+        "training_time.txt",
+        f"imitation: {len(data)} labelled env steps, {time.time() - t0:.0f} s wall\n",
+    )
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(rows[0]))
     w.writeheader()
@@ -786,8 +788,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum
         callback.checkpoint()
     wall = time.time() - t0
     save_snapshot(fs / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
-    run.append("training_time.txt",
-               f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n")
+    run.append(
+        "training_time.txt",
+        f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n",
+    )
     from training.plumbing.plots import learning_curve
 
     with run.subdir("figures") as figs:

@@ -59,9 +59,9 @@ from training.controller.model_controller import (
     run_episode,
 )
 from training.plumbing.common import CliParser, command, progress
+from training.plumbing.distributed import connect, run_tasks, shutdown
 from training.plumbing.outputs import command_output
 from training.plumbing.safe_files import read_json_object
-from training.plumbing.distributed import connect, run_tasks, shutdown
 
 BOUNDS: dict[str, tuple[float, float]] = {
     "kp": (60.0, 160.0),

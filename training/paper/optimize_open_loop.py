@@ -213,7 +213,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the searches and write the best table."""
     cfg = parse_config(OptimiseConfig, argv, __doc__.splitlines()[0])
     connect(cfg.ray, cfg.ray_address)
-    rd = make_run_dir(cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv).path
+    rd = make_run_dir(
+        cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv
+    ).path
     _RUN[:] = [rd]
     print(f"run directory: {rd}")
     results = []
@@ -258,8 +260,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"velocity = {json.dumps(list(oc.velocity))}\nmode = {oc.mode}\n"
     )
     write_file(rd / "best_open_loop.toml", toml)
-    write_file(rd / "summary.json", json_text(
-        {"searches": results, "best": top, "env_run": exact, "robustness_steps_10_seeds": rob}))
+    write_file(
+        rd / "summary.json",
+        json_text(
+            {"searches": results, "best": top, "env_run": exact, "robustness_steps_10_seeds": rob}
+        ),
+    )
     print(toml)
     print(f"through the env: {exact}")
     print(f"steps over 10 reset-noise seeds: {rob}")

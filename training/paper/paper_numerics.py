@@ -96,7 +96,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             params, cfg.posture, table, reference.replace(strict=True), cfg.seconds
         ),
     }
-    rd = make_run_dir(cfg.out_dir, "paper_numerics", "ConstrainedBiped-v0", cfg.seed, cfg, argv).path
+    rd = make_run_dir(
+        cfg.out_dir, "paper_numerics", "ConstrainedBiped-v0", cfg.seed, cfg, argv
+    ).path
     import matplotlib
 
     matplotlib.use("Agg")

@@ -11,8 +11,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import errno
 import datetime as _dt
+import errno
 import json
 import math
 import os

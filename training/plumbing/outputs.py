@@ -105,6 +105,7 @@ class OutDir:
             raise OutputError(f"{self.path / name}: {_why(e, 'a directory')}") from None
 
     def close(self) -> None:
+        """Release the descriptor (idempotent)."""
         if self.fd >= 0:
             os.close(self.fd)
             self.fd = -1
@@ -126,7 +127,7 @@ class OutDir:
         return f"{base}/{_name(name)}" if name else base
 
     def kind(self, name: str) -> str | None:
-        """"file", "dir" or None (missing); anything else (a link, a FIFO, ...) is refused."""
+        """The entry's kind: "file", "dir" or None (missing); anything else is refused."""
         try:
             st = os.stat(_name(name), dir_fd=self.fd, follow_symlinks=False)
         except FileNotFoundError:
@@ -138,6 +139,7 @@ class OutDir:
         raise OutputError(f"{self.path / name}: {_describe(st)}; only plain files belong here")
 
     def names(self) -> list[str]:
+        """The entries of the directory, sorted."""
         return sorted(os.listdir(self.fd))
 
     def read_text(self, name: str, limit: int = MAX_TEXT_BYTES) -> str:
@@ -206,12 +208,13 @@ class OutDir:
         try:
             data = text.encode("utf-8")
             while data:
-                data = data[os.write(fd, data):]
+                data = data[os.write(fd, data) :]
             os.fsync(fd)
         finally:
             os.close(fd)
 
     def truncate(self, name: str, size: int) -> None:
+        """Cut the plain file ``name`` to ``size`` bytes."""
         fd = self._open_regular(name, os.O_WRONLY)
         try:
             os.ftruncate(fd, size)
@@ -257,6 +260,7 @@ class OutDir:
             os.unlink(name, dir_fd=self.fd)
 
     def fsync(self) -> None:
+        """Flush the directory's entries (renames) to disk."""
         os.fsync(self.fd)
 
     # ------------------------------------------------------------------ helpers
@@ -460,8 +464,11 @@ def command_output(
             if name.startswith(STAGING) and out.kind(name) == "dir":
                 out.remove(name)  # a killed command's staging: ours by its name and kind
         if WHOLE not in owned:
-            foreign = [rel for rel in _listing(out) if rel != MARKER and rel not in owned
-                       and not rel.endswith("/")]  # an empty folder holds nothing to protect
+            foreign = [
+                rel
+                for rel in _listing(out)
+                if rel != MARKER and rel not in owned and not rel.endswith("/")
+            ]  # an empty folder holds nothing to protect
             if foreign:
                 more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
                 raise OutputError(
@@ -511,7 +518,9 @@ class RunLock:
         except BlockingIOError:
             holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
             os.close(fd)
-            raise OutputError(f"{self.run.path}: in use by {holder}; one writer at a time") from None
+            raise OutputError(
+                f"{self.run.path}: in use by {holder}; one writer at a time"
+            ) from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode(), 0)
         self.fd = fd

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.plumbing.outputs import save_figure
+from training.plumbing.outputs import save_figure, write_file
 from training.plumbing.safe_files import read_csv
 
 EVAL_COLUMNS = {"env_steps": int, "steps_mean": float, "steps_min": float, "return_mean": float}
@@ -85,15 +85,18 @@ def mode_timeline(
 
 
 def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
-    """Write RGB frames as an animated GIF."""
+    """Write RGB frames as an animated GIF (whole, never through a link: :func:`write_file`)."""
+    import io
+
     from PIL import Image
 
     if not images:
         return
     frames = [Image.fromarray(im) for im in images]
-    frames[0].save(
-        path, save_all=True, append_images=frames[1:], duration=max(int(1000 / fps), 20), loop=0
-    )
+    buf = io.BytesIO()
+    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:],
+                   duration=max(int(1000 / fps), 20), loop=0)  # fmt: skip
+    write_file(path, buf.getvalue())
 
 
 def learning_curve(run: Path, path: Path) -> None:

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import ast
 import errno
-import io
 import hashlib
+import io
 import json
 import os
 import struct
@@ -113,7 +113,7 @@ def read_csv(
         if missing:
             raise UntrustedFileError(f"{path}: no column {missing[0]!r}")
         rows = []
-        for i, raw in enumerate(reader):
+        for raw in reader:
             row = {}
             for k, kind in types.items():
                 v = kind(raw[k])
@@ -166,8 +166,10 @@ def _npy_array(fh, name: str, max_bytes: int) -> tuple[np.ndarray, int]:
         raise ValueError(f"dtype {str(descr)[:20]!r} (plain little-endian numbers only)")
     if fortran is not False:
         raise ValueError("Fortran order")
-    if not isinstance(shape, tuple) or len(shape) > 8 or not all(
-        isinstance(d, int) and not isinstance(d, bool) and 0 <= d < 2**40 for d in shape
+    if (
+        not isinstance(shape, tuple)
+        or len(shape) > 8
+        or not all(isinstance(d, int) and not isinstance(d, bool) and 0 <= d < 2**40 for d in shape)
     ):
         raise ValueError("a malformed shape")
     dtype = np.dtype(_NPY_DTYPES[descr])
@@ -209,7 +211,8 @@ def read_npz(
             for name, (shape, kind) in spec.items():
                 info = infos[name]
                 if info.flag_bits & 0x1 or info.compress_type not in (
-                    zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED
+                    zipfile.ZIP_STORED,
+                    zipfile.ZIP_DEFLATED,
                 ):
                     raise UntrustedFileError(f"{path}: {name} is encrypted or oddly compressed")
                 if info.file_size > max_bytes + MAX_NPY_HEADER + 16:
@@ -287,9 +290,11 @@ def safetensors_header(
             continue
         try:
             dtype, shape, (a, b) = entry["dtype"], tuple(entry["shape"]), entry["data_offsets"]
-            ok = dtype in _ST_DTYPES and all(
-                type(d) is int and 0 <= d < 2**40 for d in (*shape, a, b)
-            ) and set(entry) == {"dtype", "shape", "data_offsets"}
+            ok = (
+                dtype in _ST_DTYPES
+                and all(type(d) is int and 0 <= d < 2**40 for d in (*shape, a, b))
+                and set(entry) == {"dtype", "shape", "data_offsets"}
+            )
             ok = ok and b - a == int(np.prod(shape, dtype=np.float64)) * _ST_DTYPES[dtype]
         except (TypeError, KeyError, ValueError):
             ok = False
@@ -339,9 +344,11 @@ class Snapshot:
         return name in self.files
 
     def name(self, name: str) -> Path:
+        """The path of the snapshot's file ``name`` (for messages)."""
         return self.path / name
 
     def json(self, name: str) -> dict[str, Any]:
+        """The snapshot's JSON file ``name``, parsed from the bytes read."""
         return parse_json_object(self.files[name], self.path / name)
 
 
@@ -378,7 +385,7 @@ def _read_in(dir_fd: int | None, name: str, path: Path, limit: int) -> bytes:
         if st.st_size > limit:
             raise UntrustedFileError(f"{path}: {st.st_size} bytes, more than {limit} allowed")
         with os.fdopen(os.dup(fd), "rb") as fh:  # the size read, not the limit: read(n)
-            data = fh.read(st.st_size + 1)      # allocates n bytes before it reads
+            data = fh.read(st.st_size + 1)  # allocates n bytes before it reads
         if len(data) > limit:
             raise UntrustedFileError(f"{path}: grew past {limit} bytes while it was read")
         return data
