@@ -677,3 +677,36 @@ def test_expected_errnos_are_named():
     from training.plumbing.common import EXPECTED_ERRNOS
 
     assert {errno.ENOSPC, errno.EROFS, errno.EACCES} <= set(EXPECTED_ERRNOS)
+
+
+# ------------------------------------------------------------------ the published snapshot
+def test_a_run_publishes_its_selected_snapshot_and_evaluate_loads_it(trained_run, tmp_path):
+    from training.policy_io import published_snapshot
+
+    pub = json.loads((trained_run / "published.json").read_text())
+    assert pub["snapshot"] == "best" and "selection" in pub["why"]
+    assert published_snapshot(trained_run)[0] == "best"
+    out = tmp_path / "ev"
+    assert evaluate.main([str(trained_run), "--episodes", "1", "--out", str(out)]) == 0
+    summary = json.loads((out / "evaluation.json").read_text())
+    assert summary["which"] == "best" and summary["why"] == pub["why"]
+
+
+@pytest.mark.parametrize("policy", sorted(p.name for p in (ROOT / "policies").iterdir()))
+def test_every_committed_policy_publishes_the_snapshot_its_figures_are_of(policy):
+    """The README's rows are of the snapshot in each policy's evaluation.json; evaluate's
+    default loads the same one."""
+    from training.policy_io import published_snapshot
+
+    d = ROOT / "policies" / policy
+    assert published_snapshot(d)[0] == json.loads((d / "evaluation.json").read_text())["which"]
+
+
+def test_a_crafted_published_file_is_refused(tmp_path):
+    from training.policy_io import published_snapshot
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "published.json").write_text('{"snapshot": "../../etc", "why": ""}')
+    with pytest.raises(UntrustedFileError, match="snapshot must be one of"):
+        published_snapshot(run)

@@ -45,6 +45,7 @@ from training.policy_io import (
     load_policy,
     policy_actor,
     policy_batch_actor,
+    published_snapshot,
 )
 from training.ppo_config import REPORT_EPISODES, REPORT_SEED_OFFSET
 from training.rollouts import (
@@ -260,7 +261,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--seed", type=int_in(0, 2**31 - 1), default=REPORT_SEED_OFFSET,
         help=f"episode i uses seed + i (default {REPORT_SEED_OFFSET}: the report seeds)",
     )  # fmt: skip
-    ap.add_argument("--which", default="final", choices=sorted(SNAPSHOTS), help="snapshot")
+    ap.add_argument(
+        "--which", default=None, choices=sorted(SNAPSHOTS),
+        help="snapshot (default: the one the policy publishes: its published.json, else best/ "
+        "when the run selected one, else final/)",
+    )  # fmt: skip
     ap.add_argument(
         "--start",
         choices=["midstride", "rest"],
@@ -311,7 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     cfg = replace(cfg, env=env)
     loop["cfg"] = cfg
     name = args.run_dir.resolve().name if args.run_dir else args.controller.replace(":", "_")
-    out = args.out or Path("runs") / "evaluate" / f"{name}_{args.which}_{start}"
+    out = args.out or Path("runs") / "evaluate" / f"{name}_{args.which or 'controller'}_{start}"
     try:
         with command_output(out, "evaluate") as co:
             _evaluate(args, loop, start, Path(co.dir().where()), t0, out)
@@ -323,6 +328,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _policy_loop(args) -> dict:
     """What runs for a run directory: its network (and the config it was trained with)."""
+    why = "given by --which"
+    if args.which is None:
+        args.which, why = published_snapshot(args.run_dir)
+    args.why = why
+    print(f"snapshot: {args.which}/ ({why})", flush=True)
     policy, norm, cfg, state = load_policy(args.run_dir, args.which)
     label = "policy" + ("" if cfg.base_controller == "" else " (residual on the model controller)")
     return {
@@ -401,6 +411,7 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
         rest_strip(actor, cfg, out_dir / "figures" / "rest_start_network.png", "the network")
     summary = {
         "which": args.which,
+        "why": getattr(args, "why", ""),
         "start": start,
         "in_the_loop": in_the_loop,
         "env_kwargs": cfg.env_kwargs(),

@@ -153,6 +153,30 @@ def find_snapshot(run: Path, which: str) -> Path:
     )
 
 
+PUBLISHED_FILE = "published.json"
+"""A run's record of the snapshot its figures are of, and why (``{"snapshot", "why"}``)."""
+
+
+def published_snapshot(run: Path) -> tuple[str, str]:
+    """(snapshot name, why) of the snapshot a run publishes: the one ``evaluate`` loads.
+
+    From the run's :data:`PUBLISHED_FILE` when it has one (the name checked against
+    :data:`SNAPSHOTS`); else the run's own selection rule: ``best`` (the highest score of its
+    periodic evaluations on the selection seeds) when it has one, else ``final``.
+    """
+    path = Path(run) / PUBLISHED_FILE
+    if os.path.lexists(path):
+        d = read_json_object(path, Path(run))
+        which, why = d.get("snapshot"), d.get("why", "")
+        if which not in SNAPSHOTS or not isinstance(why, str) or len(why) > 500:
+            raise UntrustedFileError(f"{path}: snapshot must be one of {sorted(SNAPSHOTS)} "
+                                     f"with a short why")  # fmt: skip
+        return which, why
+    if available(run, "best"):
+        return "best", "the run's selection: the best periodic evaluation on the selection seeds"
+    return "final", "the run has no selection (best/) snapshot: its last weights"
+
+
 def open_snapshot(run: Path, which: str) -> Snapshot:
     """Snapshot ``which`` of a run, its files read once and checked (:func:`read_snapshot`)."""
     for _ in range(3):  # replaced between the check and the read: look again
@@ -565,13 +589,16 @@ def read_config(run: Path):
     return cfg
 
 
-def load_policy(run: Path, which: str = "final"):
+def load_policy(run: Path, which: str | None = None):
     """(policy, obs normaliser, config, snapshot state) of a run's snapshot.
 
-    Reads only files inside ``run``; checks before it builds (:func:`check_weights`); needs
-    the normaliser when the run normalised observations. Nothing is unpickled or imported.
+    ``which``: a name of :data:`SNAPSHOTS`; None: the one the run publishes
+    (:func:`published_snapshot`). Reads only files inside ``run``; checks before it builds
+    (:func:`check_weights`); needs the normaliser when the run normalised observations.
+    Nothing is unpickled or imported.
     """
     cfg = read_config(run)
+    which = which or published_snapshot(run)[0]
     snap = open_snapshot(run, which)  # every file read once: no mixing with a replacement
     inside(Path(run), snap.path)
     state = load_state(snap)

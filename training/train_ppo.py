@@ -49,6 +49,7 @@ from training.plumbing.common import (
 from training.plumbing.outputs import OutDir, RunLock, check_tree
 from training.plumbing.safe_files import read_csv, read_npz
 from training.policy_io import (
+    PUBLISHED_FILE,
     UntrustedFileError,
     available,
     is_complete,
@@ -788,6 +789,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum
         callback.checkpoint()
     wall = time.time() - t0
     save_snapshot(fs / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
+    _publish(cfg, run)
     run.append(
         "training_time.txt",
         f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n",
@@ -801,6 +803,25 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum
         flush=True,
     )
     return 0
+
+
+def _publish(cfg: PPOConfig, run: OutDir) -> None:
+    """Record in ``published.json`` the snapshot the run publishes (``evaluate`` loads it).
+
+    The run's own rule: ``best/``, its best periodic evaluation on the selection seeds, when
+    it has one; else ``final/``.
+    """
+    if available(run.path, "best"):
+        st = load_state(open_snapshot(run.path, "best"))
+        by = "the fewest steps of" if cfg.select_by == "min" else "the mean steps over"
+        why = (
+            f"the run's selection: the best score ({by} {cfg.eval_episodes} selection "
+            f"episodes, seeds {SELECTION_SEED_OFFSET}+) at {st['num_timesteps']} env steps"
+        )
+        which = "best"
+    else:
+        which, why = "final", "the run made no selection evaluation: its last weights"
+    run.write(PUBLISHED_FILE, json.dumps({"snapshot": which, "why": why}, indent=1) + "\n")
 
 
 if __name__ == "__main__":
