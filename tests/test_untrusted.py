@@ -369,8 +369,11 @@ def test_an_interrupted_evaluation_leaves_the_old_output(tmp_path, sig):
         time.sleep(0.02)
     proc.send_signal(sig)
     proc.wait(timeout=60)
+    err = proc.stderr.read().decode()
     proc.stderr.close()
     assert proc.returncode != 0
+    if sig == signal.SIGINT:  # one line naming what is kept, no traceback
+        assert "Traceback" not in err and "interrupted; nothing was written" in err, err
     assert json.loads((out / "evaluation.json").read_text()) == {"old": True}
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".staging-")) == [
         MARKER,

@@ -710,3 +710,39 @@ def test_a_crafted_published_file_is_refused(tmp_path):
     (run / "published.json").write_text('{"snapshot": "../../etc", "why": ""}')
     with pytest.raises(UntrustedFileError, match="snapshot must be one of"):
         published_snapshot(run)
+
+
+# ------------------------------------------------------------------ the stop rule
+def _walking_evaluations(monkeypatch):
+    """Every selection episode walks 25 steps (the evaluations, not the training, faked)."""
+
+    def fake(act, env_kwargs, seeds, env_id="", **_kw):
+        return [{"steps_completed": 25, "distance_m": 20.0, "return": 1.0,
+                 "end": "time_limit"} for _ in seeds]  # fmt: skip
+
+    monkeypatch.setattr(train_ppo, "run_episodes_batched", fake)
+
+
+def test_a_run_stops_once_its_criterion_has_held_and_says_so(tmp_path, monkeypatch, capsys):
+    _walking_evaluations(monkeypatch)
+    args = SMALL + ["--out-dir", str(tmp_path), "--total-timesteps", "4096"]
+    args += ["--eval-freq", "512", "--checkpoint-freq", "512", "--stop-min-steps", "20"]
+    assert train_ppo.main(args) == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    n = load_state(run / "final")["num_timesteps"]
+    assert 1024 <= n < 1024 + 256  # two evaluations (512, 1024), then the stop
+    assert "[stop] 1024 env steps" in capsys.readouterr().out
+    assert "stopped: every selection episode" in (run / "training_time.txt").read_text()
+    assert "stopped" in json.loads((run / "published.json").read_text())["why"]
+    # a resume of a stopped run trains no further, unless given a new total
+    assert train_ppo.main(["--resume", str(run), "--progress", "false"]) == 0
+    assert load_state(run / "final")["num_timesteps"] == n
+
+
+def test_a_run_without_the_criterion_uses_its_budget(tmp_path, monkeypatch):
+    _walking_evaluations(monkeypatch)
+    args = SMALL + ["--out-dir", str(tmp_path), "--total-timesteps", "1536", "--eval-freq", "512"]
+    assert train_ppo.main(args) == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    assert load_state(run / "final")["num_timesteps"] >= 1536
+    assert "budget of 1536 env steps ended" in (run / "training_time.txt").read_text()

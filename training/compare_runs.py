@@ -62,14 +62,18 @@ def differences(cfg, base) -> str:
     return ", ".join(diff) or "-"
 
 
-def evaluate_run(run: Path, which: str, seeds: list[int]) -> dict:
-    """One run's snapshot on ``seeds``: the summary of :func:`training.rollouts.summarize`."""
+def evaluate_run(run: Path, which: str, seeds: list[int], desc: str = "") -> dict:
+    """One run's snapshot on ``seeds``: the summary of :func:`training.rollouts.summarize`.
+
+    ``desc``: label of a progress bar over the episodes (none when empty).
+    """
     policy, norm, cfg, state = load_policy(run, which)
     start = cfg.evaluation_start()
     cfg = replace(cfg, env={**cfg.env, "start": start})
     eps = run_episodes(
-        policy_actor(policy, norm, cfg), cfg.env_kwargs(), seeds, cfg.env_id, episode_s=EPISODE_S
-    )
+        policy_actor(policy, norm, cfg), cfg.env_kwargs(), seeds, cfg.env_id, desc=desc,
+        episode_s=EPISODE_S,
+    )  # fmt: skip
     row = summarize(f"{run.name} ({which})", eps)
     row.update(num_timesteps=int(state.get("num_timesteps", 0)), start=start)
     return row
@@ -123,13 +127,15 @@ def _compare(a: argparse.Namespace) -> int:
     rows = [scaffold_row(a.scaffold, seeds)] if a.scaffold is not None else []
     base = read_config(a.runs[0]) if a.runs else None
     t0 = time.time()
+    n_rows, k = len(a.runs) * len(a.which), 0
     for run in a.runs:
         cfg = read_config(run)
         for which in a.which:
+            k += 1
             if not available(run, which):
                 print(f"{run}: no {which} snapshot", flush=True)
                 continue
-            row = evaluate_run(run, which, seeds)
+            row = evaluate_run(run, which, seeds, desc=f"[{k}/{n_rows}] {run.name} {which}")
             steps = np.array([e["steps_completed"] for e in row["episodes"]])
             row.update(
                 run=str(run),

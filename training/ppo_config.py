@@ -61,6 +61,10 @@ class PPOConfig:
     # in the batched env)
     select_by: str = "mean"  # best/ is the evaluation with the most steps: "mean" or "min"
     # (the fewest steps of its episodes first, then the mean)
+    stop_min_steps: int = 0  # > 0: the run stops by itself once every selection episode
+    # completed at least this many steps in stop_evals consecutive evaluations (its own
+    # criterion, on the selection seeds); 0: it trains to total_timesteps
+    stop_evals: int = 2  # consecutive evaluations the stop criterion must hold
     checkpoint_freq: int = 250_000  # env steps between checkpoints (resume continues there)
     base_controller: str = ""  # "model": learn a residual on the model controller ("" = none)
     gear: tuple[float, ...] = (150.0,)  # N m per unit action, one value or one per joint
@@ -271,7 +275,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
     ("bc_ankle_weight", 0.0, 1e6), ("log_std_joints", -20.0, 5.0), ("action_std_nm", 0.0, 150.0),
     ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
-    ("curriculum_steps", 0, _BIG),
+    ("curriculum_steps", 0, _BIG), ("stop_min_steps", 0, 100_000), ("stop_evals", 1, 1000),
 )  # fmt: skip
 
 

@@ -50,6 +50,7 @@ from training.plumbing.outputs import OutDir, RunLock, check_tree
 from training.plumbing.safe_files import read_csv, read_npz
 from training.policy_io import (
     PUBLISHED_FILE,
+    STATE_FILE,
     UntrustedFileError,
     available,
     is_complete,
@@ -367,7 +368,9 @@ def truncate_eval_csv(run: OutDir, n: int) -> int:
     return len(rows) - len(keep)
 
 
-def _callbacks(cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float = 0.0):
+def _callbacks(
+    cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float = 0.0, streak: int = 0
+):
     from stable_baselines3.common.callbacks import BaseCallback
 
     class EvalAndCheckpoint(BaseCallback):
@@ -385,6 +388,8 @@ def _callbacks(cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float =
             self.next_eval = cfg.eval_freq
             self.next_ckpt = cfg.checkpoint_freq
             self.best = best
+            self.streak = streak  # consecutive evaluations meeting the stop criterion
+            self.stopped = False
             self.t0 = time.time() - wall0  # wall_s counts over every session of the run
             self.snapshots = Path(run.where())  # paths through the run's held descriptor
 
@@ -404,7 +409,7 @@ def _callbacks(cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float =
             if n >= self.next_ckpt:
                 self.next_ckpt += cfg.checkpoint_freq
                 self.checkpoint()
-            return True
+            return not self.stopped
 
         def checkpoint(self) -> None:
             """Save the resumable state (weights, optimiser, normaliser, counters)."""
@@ -416,6 +421,8 @@ def _callbacks(cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float =
                     "num_timesteps": self.model.num_timesteps,
                     "best": self.best,
                     "wall_s": time.time() - self.t0,
+                    "stop_streak": self.streak,
+                    "stopped": self.stopped,
                 },
                 vecnorm,
                 optimizer=True,
@@ -432,6 +439,10 @@ def _callbacks(cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float =
             _append_csv(run, "eval.csv", row)
             for k in ("steps_mean", "distance_mean_m", "return_mean"):
                 self.logger.record(f"eval/{k}", row[k])
+            if cfg.stop_min_steps > 0:
+                met = row["steps_min"] >= cfg.stop_min_steps
+                self.streak = self.streak + 1 if met else 0
+                self.stopped = self.streak >= cfg.stop_evals
             score = selection_score(row, cfg.select_by)
             if score > self.best:
                 self.best = score
@@ -447,8 +458,17 @@ def _callbacks(cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float =
                 f"({time.time() - self.t0:.0f} s)",
                 flush=True,
             )
+            if self.stopped:
+                print(f"[stop] {n} env steps: {stop_reason(cfg)}; the run stops here "
+                      f"({time.time() - self.t0:.0f} s)", flush=True)  # fmt: skip
 
     return EvalAndCheckpoint()
+
+
+def stop_reason(cfg: PPOConfig) -> str:
+    """The stop criterion in words (it held)."""
+    return (f"every selection episode completed at least {cfg.stop_min_steps} steps in "
+            f"{cfg.stop_evals} consecutive evaluations")  # fmt: skip
 
 
 def write_settings(run: OutDir, cfg: PPOConfig) -> None:
@@ -678,10 +698,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             cfg = flags
             write_settings(handle, cfg)
-        return _main(cfg, handle)
+        return _main(cfg, handle, extend="total_timesteps" in given)
 
 
-def _main(cfg: PPOConfig, run: OutDir) -> int:
+def _main(cfg: PPOConfig, run: OutDir, extend: bool = False) -> int:
     """:func:`main` with the run's lock held."""
     import torch
     from stable_baselines3.common.utils import set_random_seed
@@ -703,16 +723,19 @@ def _main(cfg: PPOConfig, run: OutDir) -> int:
     venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, _monitor_file(run, start),
                                  curriculum=in_curriculum)  # fmt: skip
     try:
-        return _train(cfg, run, venv, vecnorm, checkpoint, in_curriculum)
+        return _train(cfg, run, venv, vecnorm, checkpoint, in_curriculum, extend)
     finally:
         vecnorm.venv.close()  # the curriculum may have replaced the first
 
 
-def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum: bool) -> int:
+def _train(
+    cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum: bool, extend: bool
+) -> int:
     """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env.
 
     ``checkpoint``: the :class:`~training.plumbing.safe_files.Snapshot` a resume continues
-    from (None: a new run).
+    from (None: a new run); ``extend``: the resume gave a new total (a run that stopped by
+    its criterion trains on only then).
     """
     import torch
 
@@ -722,7 +745,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum
         best = load_state(open_snapshot(run.path, "best")).get("score", -np.inf)
     demos = None
     resuming = checkpoint is not None
-    start = 0
+    start, streak, stopped = 0, 0, False
     if resuming:
         n = cfg.obs_dim()
         model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
@@ -732,6 +755,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum
         state = load_state(checkpoint)
         model.num_timesteps = start = state["num_timesteps"]
         best = max(best, state.get("best", -np.inf))
+        streak = state.get("stop_streak", 0)
+        if type(streak) is not int or not 0 <= streak <= 1000:
+            raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: stop_streak out of range")
+        stopped = state.get("stopped", False) is True and not extend
         print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
     elif cfg.teacher and available(run.path, "imitation"):
         n = cfg.obs_dim()
@@ -770,9 +797,14 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum
             model.policy, demos, cfg.bc_anchor_lr, weights=bc_weights(cfg), seed=cfg.seed
         )
     remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
+    if stopped:
+        print(f"the run stopped at {start} env steps: {stop_reason(cfg)}; give "
+              f"--total-timesteps to train on", flush=True)  # fmt: skip
+        remaining = 0
     t0 = time.time()
     wall0 = load_state(checkpoint).get("wall_s", 0.0) if resuming else 0.0
-    callback = _callbacks(cfg, run, vecnorm, best, float(wall0))
+    callback = _callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak)
+    callback.stopped = stopped
     if remaining > 0:
         print(f"PPO: {remaining} env steps to go", flush=True)
         model.learn(
@@ -789,23 +821,26 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum
         callback.checkpoint()
     wall = time.time() - t0
     save_snapshot(fs / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
-    _publish(cfg, run)
+    ended = (f"stopped: {stop_reason(cfg)}" if callback.stopped
+             else f"the budget of {cfg.total_timesteps} env steps ended")  # fmt: skip
+    _publish(cfg, run, ended)
     run.append(
         "training_time.txt",
-        f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session\n",
+        f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session; {ended}\n",
     )
     from training.plumbing.plots import learning_curve
 
     with run.subdir("figures") as figs:
         learning_curve(run.path, Path(figs.where()) / "learning_curve.png")
     print(
-        f"done: {model.num_timesteps} env steps in {wall:.0f} s; run directory: {run.path}",
+        f"done: {model.num_timesteps} env steps in {wall:.0f} s ({ended}); run directory: "
+        f"{run.path}",
         flush=True,
     )
     return 0
 
 
-def _publish(cfg: PPOConfig, run: OutDir) -> None:
+def _publish(cfg: PPOConfig, run: OutDir, ended: str = "") -> None:
     """Record in ``published.json`` the snapshot the run publishes (``evaluate`` loads it).
 
     The run's own rule: ``best/``, its best periodic evaluation on the selection seeds, when
@@ -821,6 +856,8 @@ def _publish(cfg: PPOConfig, run: OutDir) -> None:
         which = "best"
     else:
         which, why = "final", "the run made no selection evaluation: its last weights"
+    if ended:
+        why += f" (training: {ended})"
     run.write(PUBLISHED_FILE, json.dumps({"snapshot": which, "why": why}, indent=1) + "\n")
 
 
