@@ -38,8 +38,8 @@ from .starts import check_start_state, draw_starts, start_slots
 from .state import FS_ROOT, FS_T, ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
 from .tracking import Tracking
 
-BASE_INFO_KEYS = ("mode", "stance_side", "steps_completed", "t", "hip_y", "switches", "events",
-                  "termination_reason")  # fmt: skip
+BASE_INFO_KEYS = ("mode", "stance_side", "steps_completed", "t", "hip_y", "root_y", "switches",
+                  "events", "termination_reason")  # fmt: skip
 """``info`` keys of every env; the reward's terms (``reward_<term>``) follow, then, when the
 settings ask for them, ``torque`` (PD actions) and ``push_impulse_ns``, ``push_dv_m_s``."""
 

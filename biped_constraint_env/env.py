@@ -44,7 +44,8 @@ class ConstrainedBipedEnv(gym.Env):
     With ``stop_at_switch=True`` a period ends early, just after a model switch (its impact
     and, at 3 -> 4, the renumbering applied), so that the next action acts from the switch
     itself: the paper changes the torque at the switch, and a torque held past the 3 -> 4
-    renumbering would otherwise act on other joints. ``info["t"]`` gives the time.
+    renumbering would otherwise act on other joints. ``info["t"]`` gives the time,
+    ``info["hip_y"]`` the hip's and ``info["root_y"]`` the stance toe's world y [m].
 
     | Num | joint | acts on (link i vs i-1)        | limit [N m] | sign |
     |-----|-------|--------------------------------|-------------|------|
