@@ -118,7 +118,7 @@ def test_train_ppo_with_teacher_smoke(tmp_path):
     assert (run / "imitation.csv").is_file()
     from training.policy_io import load_policy, load_state
 
-    policy, _, cfg, state = load_policy(run)
+    policy, _, cfg, state = load_policy(run, "final")
     assert isinstance(policy.features_extractor, imitation.FixedNormalizer)
     std = policy.log_std.exp().detach().numpy() * GEAR
     assert std == pytest.approx(np.full(5, 0.3), rel=0.2)  # action_std_nm, per joint in N m

@@ -202,10 +202,10 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     seen = []
     real = compare_runs.run_episodes
 
-    def spy(actor, env_kwargs, seeds, env_id, episode_s=None):
+    def spy(actor, env_kwargs, seeds, env_id, episode_s=None, desc=""):
         seen.append(env_kwargs)
         assert episode_s == 30.0  # report episodes: 30 s at any control period
-        return real(actor, env_kwargs, seeds, env_id, episode_s=episode_s)
+        return real(actor, env_kwargs, seeds, env_id, episode_s=episode_s, desc=desc)
 
     monkeypatch.setattr(compare_runs, "run_episodes", spy)
     out = tmp_path / "compare.json"

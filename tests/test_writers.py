@@ -746,3 +746,170 @@ def test_a_run_without_the_criterion_uses_its_budget(tmp_path, monkeypatch):
     (run,) = (tmp_path / "train_ppo").iterdir()
     assert load_state(run / "final")["num_timesteps"] >= 1536
     assert "budget of 1536 env steps ended" in (run / "training_time.txt").read_text()
+
+
+# ------------------------------------------------------------------ a second review's findings
+def test_a_refused_out_keeps_the_users_staging_named_folder(tmp_path):
+    out = tmp_path / "userdir"
+    (out / ".staging-notes").mkdir(parents=True)
+    (out / ".staging-notes" / "thesis.txt").write_text("precious")
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(UntrustedFileError), command_output(out, "failure_modes"):
+        pass
+    assert (out / ".staging-notes" / "thesis.txt").read_text() == "precious"
+
+
+def test_a_dead_commands_staging_is_cleaned_and_a_live_ones_kept(tmp_path):
+    out = tmp_path / "out"
+    with command_output(out, "cmd") as co:
+        co.dir().write("a.txt", "1")
+    dead = out / ".staging-cmd-999999999-0123abcd"
+    live = out / f".staging-cmd-{os.getpid()}-0123abcd"
+    dead.mkdir()
+    live.mkdir()
+    with command_output(out, "cmd") as co:
+        co.dir().write("a.txt", "2")
+    assert not dead.exists() and live.exists()
+
+
+def _policy_copy(tmp_path: Path, name: str = "ppo_from_scratch") -> Path:
+    run = tmp_path / "p"
+    shutil.copytree(ROOT / "policies" / name, run, ignore=shutil.ignore_patterns("figures"))
+    return run
+
+
+def _evaluate_refused(run: Path, tmp_path: Path, *words: str, extra=()) -> None:
+    with pytest.raises(SystemExit) as e:
+        evaluate.main([str(run), "--episodes", "1", "--out", str(tmp_path / "o"), *extra])
+    _one_line_refusal(e, *words)
+
+
+def test_a_manifest_naming_an_unknown_file_is_refused(tmp_path):
+    run = _policy_copy(tmp_path)
+    for name in ("a\x00b", "", "pad0.bin"):
+        m = json.loads((run / "final" / "manifest.json").read_text())
+        m[name] = {"bytes": 1, "sha256": "x"}
+        (run / "final" / "manifest.json").write_text(json.dumps(m))
+        _evaluate_refused(run, tmp_path, "not a snapshot file", extra=["--which", "final"])
+        m.pop(name)
+        (run / "final" / "manifest.json").write_text(json.dumps(m))
+
+
+def test_a_safetensors_shape_of_many_dimensions_is_refused(tmp_path):
+    from training.plumbing.safe_files import safetensors_header
+
+    h = json.dumps({"a": {"dtype": "F32", "shape": [2**39] * 30, "data_offsets": [0, 4]}})
+    data = struct.pack("<Q", len(h)) + h.encode() + b"\0" * 4
+    with pytest.raises(UntrustedFileError, match="malformed header entry"):
+        safetensors_header(tmp_path / "x", data=data)
+
+
+def test_a_huge_integer_score_is_one_line(tmp_path):
+    run = _policy_copy(tmp_path)
+    (run / "final" / STATE_FILE).write_text('{"num_timesteps": 1, "score": 18446744073709551616}')
+    write_manifest(run / "final")
+    _evaluate_refused(run, tmp_path, "score must be a number in", extra=["--which", "final"])
+
+
+def test_an_optimizer_tensor_of_another_name_is_one_line(run):
+    def add(groups, tensors):
+        import torch
+
+        tensors["x"] = torch.zeros(1)
+
+    _optimizer_meta(run, add)
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, "not this optimizer's state")
+
+
+@pytest.mark.parametrize("name", ["tb/PPO_1\u00b2", "tb/events", "\u00b2.monitor.csv"])
+def test_log_names_the_run_does_not_write_are_refused(run, name):
+    target = run / name
+    target.parent.mkdir(exist_ok=True)
+    if name.startswith("tb/"):
+        target.mkdir()
+    else:
+        target.write_text("")
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--total-timesteps", "1024", "--progress", "false"])
+    _one_line_refusal(e, "this run writes")
+
+
+def test_an_imitation_log_of_deep_or_odd_values_is_refused(tmp_path):
+    from training.plumbing.plots import _int_list
+
+    for text in ("[" * 50_000 + "]" * 50_000, '{"a": 1}', "[1.5]", "[]"):
+        with pytest.raises((ValueError, RecursionError)):
+            _int_list(text)
+    assert _int_list("[3, 4]") == [3, 4]
+
+
+def test_a_controller_spec_of_three_parts_is_refused(tmp_path, monkeypatch):
+    run = _policy_copy(tmp_path, "ppo_walker")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "start_rest+start_rest").write_text("{}")  # a file the spec would open
+    text = (run / "config.toml").read_text().splitlines()
+    text = [ln for ln in text if not ln.startswith("base_controller")]
+    text.insert(0, 'base_controller = "model:teacher_robust+start_rest+start_rest"')
+    (run / "config.toml").write_text("\n".join(text) + "\n")
+    _evaluate_refused(run, tmp_path, "model:NAME[+NAME]")
+    from training.controller.model_controller import controller_from
+
+    with pytest.raises(ValueError, match="at most one start phase"):
+        controller_from("model:teacher_robust+start_rest+start_rest")
+
+
+def test_a_device_lock_is_refused_before_it_is_opened(run):
+    if os.geteuid() != 0:
+        pytest.skip("making a device node needs root")
+    os.mknod(run / ".lock", 0o600 | __import__("stat").S_IFCHR, os.makedev(1, 3))
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, ".lock", "a device")
+
+
+def test_a_run_with_no_snapshot_to_continue_is_not_restarted_from_zero(run):
+    """A run without a teacher continues from a PPO checkpoint only, never from imitation/."""
+    shutil.rmtree(run / "checkpoints")
+    shutil.copytree(run / "best", run / "imitation")
+    rows = (run / "eval.csv").read_text()
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, "no complete snapshot to continue from")
+    assert (run / "eval.csv").read_text() == rows
+
+
+def test_a_linear_schedule_run_can_be_extended(tmp_path):
+    args = SMALL + ["--out-dir", str(tmp_path), "--total-timesteps", "512", "--lr-schedule"]
+    args += ["linear", "--checkpoint-freq", "256", "--eval-freq", "256"]
+    assert train_ppo.main(args) == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    assert train_ppo.main(["--resume", str(run), "--total-timesteps", "1024"]) == 0
+    assert load_state(run / "final")["num_timesteps"] >= 1024
+
+
+def test_a_checkpoint_folder_linked_outside_is_refused_before_it_is_read(tmp_path, victim):
+    run = _policy_copy(tmp_path)
+    (victim.parent / "latest").mkdir()
+    (run / "checkpoints").symlink_to(victim.parent)
+    _evaluate_refused(run, tmp_path, "symlink", extra=["--which", "checkpoint"])
+
+
+def test_a_teacher_runs_observation_statistics_are_refused(tmp_path):
+    run = _policy_copy(tmp_path, "ppo_walker")
+    path = run / "final" / NORMALIZER_FILE
+    with np.load(path) as z:
+        d = {k: z[k] for k in z.files}
+    n = 26  # the config's observation (with the clock)
+    d.update(norm_obs=np.float64(1.0), obs_mean=np.zeros(n), obs_var=np.ones(n))
+    np.savez(path, **d)
+    write_manifest(path.parent)
+    _evaluate_refused(run, tmp_path, "normalises its own input")
+
+
+def test_a_stopped_flag_that_is_not_a_boolean_is_refused(run):
+    _state(run, stopped="yes")
+    with pytest.raises(SystemExit) as e:
+        train_ppo.main(["--resume", str(run), "--progress", "false"])
+    _one_line_refusal(e, "stopped must be a boolean")

@@ -138,6 +138,7 @@ def find_snapshot(run: Path, which: str) -> Path:
         raise ValueError(f"which must be one of {sorted(SNAPSHOTS)}, got {which!r}")
     where = Path(run) / SNAPSHOTS[which]
     prev = where.with_name(where.name + PREVIOUS_SUFFIX)
+    inside(Path(run), where.parent)  # no link on the way (checkpoints/ a link outside)
     problem = verify_manifest(where)
     if problem is None:
         return where
@@ -195,6 +196,7 @@ def _snap(where: Path | Snapshot) -> Snapshot:
 def available(run: Path, which: str) -> bool:
     """Whether a run has a complete snapshot ``which`` (or its kept previous one)."""
     where = Path(run) / SNAPSHOTS[which]
+    inside(Path(run), where.parent)  # no link on the way (checkpoints/ a link outside)
     return is_complete(where) or is_complete(where.with_name(where.name + PREVIOUS_SUFFIX))
 
 
@@ -263,10 +265,9 @@ def _score(path: Path, state: dict, key: str) -> float:
     v = state.get(key)
     if v is None:
         return -np.inf
-    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
-        raise UntrustedFileError(f"{path}: {key} must be a finite number or null, got {v!r}")
-    if abs(v) > 1e12:
-        raise UntrustedFileError(f"{path}: {key} = {v!r} is out of range")
+    if isinstance(v, bool) or not isinstance(v, int | float) or not -1e12 <= v <= 1e12:
+        raise UntrustedFileError(f"{path}: {key} must be a number in [-1e12, 1e12] or null, got "
+                                 f"{str(v)[:40]}")  # fmt: skip
     return float(v)
 
 
@@ -392,8 +393,8 @@ def load_optimizer(policy, where: Path | Snapshot) -> None:
             raise UntrustedFileError(f"{path}: parameter group keys differ from the optimizer's")
         for k, v in g.items():
             if k == "lr":
-                if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v <= 1:
-                    raise UntrustedFileError(f"{path}: lr must be in (0, 1], got {v!r}")
+                if isinstance(v, bool) or not isinstance(v, int | float) or not 0 <= v <= 1:
+                    raise UntrustedFileError(f"{path}: lr must be in [0, 1], got {v!r}")
             elif json.dumps(v) != json.dumps(o[k]):
                 raise UntrustedFileError(f"{path}: {k} = {v!r}, the run's optimizer has {o[k]!r}")
     if scalars:
@@ -403,8 +404,10 @@ def load_optimizer(policy, where: Path | Snapshot) -> None:
         want[f"state.{pid}.exp_avg"] = tuple(p.shape)
         want[f"state.{pid}.exp_avg_sq"] = tuple(p.shape)
         want[f"state.{pid}.step"] = ()
+    if set(tensors) - set(want):
+        raise UntrustedFileError(f"{path}: its tensors are not this optimizer's state")
     pids = {k.split(".")[1] for k in tensors}
-    if set(tensors) - set(want) or any(
+    if any(
         f"state.{pid}.{k}" not in tensors for pid in pids for k in ("exp_avg", "exp_avg_sq", "step")
     ):
         raise UntrustedFileError(f"{path}: its tensors are not this optimizer's state")
@@ -610,7 +613,10 @@ def load_policy(run: Path, which: str | None = None):
     raw = snap.files.get(NORMALIZER_FILE)
     if cfg.teacher:  # the network normalises its own input; VecNormalize kept returns only
         d = read_normalizer(norm_path, cfg.obs_dim(), raw) if raw is not None else None
-        norm = ObsNormalizer(d if d and d["norm_obs"] else None)
+        if d is not None and d["norm_obs"]:
+            raise UntrustedFileError(f"{norm_path}: observation statistics in a run whose network "
+                                     f"normalises its own input (a teacher run)")  # fmt: skip
+        norm = ObsNormalizer(None)
     elif raw is None:
         raise UntrustedFileError(f"{norm_path}: missing")
     else:

@@ -159,7 +159,7 @@ class PPOConfig:
             kind, _, names = spec.partition(":")
             parts = names.split("+") if names else []
             known = shipped_controllers()
-            if kind != "model" or not parts or any(p not in known for p in parts):
+            if kind != "model" or not 1 <= len(parts) <= 2 or any(p not in known for p in parts):
                 raise ValueError(
                     f"{name} must be '', 'model' or 'model:NAME[+NAME]' with shipped names "
                     f"{known}, got {spec!r}"

@@ -28,6 +28,7 @@ import csv
 import io
 import json
 import os
+import re
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -83,6 +84,15 @@ PPO_CKPT = "checkpoints/latest"
 def _data_spec(cfg: PPOConfig) -> dict:
     """The shapes of a snapshot's labelled data (observations, actions), for :func:`read_npz`."""
     return {"obs": ((None, cfg.obs_dim()), "f"), "act": ((None, 5), "f")}
+
+
+def _data_budget(cfg: PPOConfig) -> int:
+    """Largest labelled-data member [bytes] the config's imitation phase can write (float64).
+
+    Its DART and DAgger episodes' periods times the observation (or the 5 actions).
+    """
+    samples = cfg.bc_episodes0 * cfg.bc_periods0 + cfg.bc_rounds * cfg.bc_episodes * cfg.bc_periods
+    return max(samples, 1) * max(cfg.obs_dim(), 5) * 8
 
 
 def imitation_warm_start(cfg: PPOConfig, run: Path, make_model):
@@ -177,11 +187,17 @@ def _resume_imitation(cfg: PPOConfig, where: Path, make_model, rng):
     seed, rows = st.get("seed"), st.get("rows")
     if type(seed) is not int or not 0 <= seed < 2**62:
         raise UntrustedFileError(f"{path}: seed must be an integer in [0, 2^62)")
-    if not isinstance(rows, list) or len(rows) != k or not all(isinstance(r, dict) for r in rows):
+    keys = {"round", "samples", "mse", "student_steps", "wall_s"}
+    if (
+        not isinstance(rows, list)
+        or len(rows) != k
+        or not all(isinstance(r, dict) and set(r) == keys for r in rows)
+    ):
         raise UntrustedFileError(f"{path}: rows must be one table per round done ({k})")
     if "data.npz" not in snap:
         raise UntrustedFileError(f"{snap.name('data.npz')}: missing")
-    z = read_npz(snap.name("data.npz"), _data_spec(cfg), data=snap.files["data.npz"])
+    z = read_npz(snap.name("data.npz"), _data_spec(cfg), data=snap.files["data.npz"],
+                 max_bytes=_data_budget(cfg))  # fmt: skip
     data = imitation.Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
     n = cfg.obs_dim()  # the statistics come with the weights
     model = make_model(np.zeros(n), np.ones(n))
@@ -500,6 +516,23 @@ def _parse(argv: Sequence[str] | None) -> tuple[PPOConfig, set[str]]:
     return cfg, given
 
 
+_LOG_NAMES = re.compile(r"[0-9]{1,15}(\.[0-9]{1,6})?\.monitor\.csv")
+_TB_RUN = re.compile(r"PPO_[0-9]{1,6}")
+
+
+def _check_logs(run: OutDir) -> None:
+    """Refuse log names that the run does not write (SB3's logger and the figures parse them)."""
+    for name in run.names():
+        if name.endswith(".monitor.csv") and not _LOG_NAMES.fullmatch(name):
+            raise UntrustedFileError(f"{run.path / name}: not a monitor file name this run writes")
+    if run.kind("tb") == "dir":
+        with run.subdir("tb", create=False) as tb:
+            bad = [n for n in tb.names() if not _TB_RUN.fullmatch(n)]
+        if bad:
+            raise UntrustedFileError(f"{run.path / 'tb' / bad[0]}: not a TensorBoard run name "
+                                     f"(PPO_N) this run writes")  # fmt: skip
+
+
 def _resume_config(flags: PPOConfig, given: set[str], run: OutDir) -> PPOConfig:
     """A resumed run's own config (with the run's lock held and its tree checked).
 
@@ -511,11 +544,12 @@ def _resume_config(flags: PPOConfig, given: set[str], run: OutDir) -> PPOConfig:
     except FileNotFoundError as e:
         raise Refusal(f"train_ppo: error: --resume: {e}") from None
     cfg = replace(saved, **{k: getattr(flags, k) for k in given}, resume=str(run.path))
-    if (
-        not any(available(run.path, k) for k in ("checkpoint", "imitation"))
-        and not is_complete(run.path / IMITATION_CKPT)
-        and not is_complete(run.path / (IMITATION_CKPT + ".prev"))
-    ):
+    imitation = cfg.teacher and (
+        available(run.path, "imitation")
+        or is_complete(run.path / IMITATION_CKPT)
+        or is_complete(run.path / (IMITATION_CKPT + ".prev"))
+    )  # a snapshot the run continues from: a PPO checkpoint, or (a teacher's run) imitation
+    if not available(run.path, "checkpoint") and not imitation:
         raise Refusal(
             f"train_ppo: error: --resume: {run.path} has no complete snapshot to continue from "
             f"({PPO_CKPT}, {IMITATION_CKPT} or imitation); start a new run instead"
@@ -693,6 +727,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with handle, RunLock(handle):
         _RUN.append(handle.path)
         check_tree(handle)
+        _check_logs(handle)
         if flags.resume:
             cfg = _resume_config(flags, given, handle)
         else:
@@ -758,7 +793,9 @@ def _train(
         streak = state.get("stop_streak", 0)
         if type(streak) is not int or not 0 <= streak <= 1000:
             raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: stop_streak out of range")
-        stopped = state.get("stopped", False) is True and not extend
+        if not isinstance(state.get("stopped", False), bool):
+            raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: stopped must be a boolean")
+        stopped = state.get("stopped", False) and not extend
         print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
     elif cfg.teacher and available(run.path, "imitation"):
         n = cfg.obs_dim()
@@ -791,7 +828,8 @@ def _train(
         snap = open_snapshot(run.path, "imitation")
         if "demos.npz" not in snap:
             raise UntrustedFileError(f"{snap.name('demos.npz')}: missing")
-        z = read_npz(snap.name("demos.npz"), _data_spec(cfg), data=snap.files["demos.npz"])
+        z = read_npz(snap.name("demos.npz"), _data_spec(cfg), data=snap.files["demos.npz"],
+                     max_bytes=_data_budget(cfg))  # fmt: skip
         demos = Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
         anchor = Anchor(
             model.policy, demos, cfg.bc_anchor_lr, weights=bc_weights(cfg), seed=cfg.seed

@@ -373,6 +373,8 @@ def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelControlle
             f"a controller is 'model', 'model:NAME' or 'model:GAINS.json' (+START), got {spec!r}"
         )
     name, _, start = spec.partition(":")[2].partition("+")
+    if "+" in start:
+        raise ValueError(f"a controller has at most one start phase (NAME+START), got {spec!r}")
     gains = _read_gains(name, spec) if name else None
     start_gains = _read_gains(start, spec) if start else None
     return ModelController(gains, limit=limit, start_gains=start_gains)
@@ -381,7 +383,11 @@ def controller_from(spec: str, limit: float = TORQUE_LIMIT_NM) -> ModelControlle
 def _read_gains(name: str, spec: str) -> dict[str, float]:
     """The gains of a shipped name (``training/controller/gains/NAME.json``) or a JSON path."""
     shipped = CONTROLLERS_DIR / f"{name}.json"
-    path = shipped if "/" not in name and shipped.is_file() else Path(name)
+    plain = name.replace("_", "").replace("-", "").isalnum()  # a shipped name, never a path
+    path = shipped if plain else Path(name)
+    if plain and name not in shipped_controllers():
+        raise ValueError(f"controller {spec!r}: no shipped gains {name!r}; shipped gains: "
+                         f"{shipped_controllers()}")  # fmt: skip
     if not path.is_file():
         known = sorted(p.stem for p in CONTROLLERS_DIR.glob("*.json"))
         raise ValueError(f"controller {spec!r}: no file {path}; shipped gains: {known}")

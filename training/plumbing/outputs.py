@@ -29,6 +29,7 @@ import fcntl
 import io
 import json
 import os
+import re
 import secrets
 import shutil
 import socket
@@ -36,7 +37,7 @@ import stat
 from collections.abc import Iterator
 from pathlib import Path
 
-from training.plumbing.safe_files import MAX_TEXT_BYTES, UntrustedFileError
+from training.plumbing.safe_files import MAX_TEXT_BYTES, SHOWN, UntrustedFileError, shown
 
 MARKER = ".written_by.json"
 """An output directory's record of its files and the command that wrote each one."""
@@ -62,7 +63,8 @@ class OutDir:
     """A directory held open: every write goes through its descriptor, never through a link."""
 
     def __init__(self, fd: int, path: Path):
-        self.fd, self.path = fd, Path(path)
+        self.fd, self.path = fd, shown(path)
+        SHOWN[fd] = self.path
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -72,13 +74,14 @@ class OutDir:
         Refuses a ``path`` that is a symlink or not a directory.
         """
         path = Path(path)
+        named = shown(path)
         if create and not os.path.lexists(path):
             try:
                 path.mkdir(parents=True)
             except FileExistsError:
                 pass
             except OSError as e:
-                raise OutputError(f"{path}: cannot create it ({e.strerror})") from None
+                raise OutputError(f"{named}: cannot create it ({e.strerror})") from None
         flags = _DIR_FLAGS
         if path.parent == Path("/proc/self/fd"):  # a descriptor of our own (OutDir.where)
             flags &= ~os.O_NOFOLLOW
@@ -86,8 +89,8 @@ class OutDir:
             return cls(os.open(path, flags), path)
         except OSError as e:
             if os.path.islink(path):
-                raise OutputError(f"{path}: a symlink (give a directory, not a link)") from None
-            raise OutputError(f"{path}: {_why(e, 'a directory')}") from None
+                raise OutputError(f"{named}: a symlink (give a directory, not a link)") from None
+            raise OutputError(f"{named}: {_why(e, 'a directory')}") from None
 
     def subdir(self, name: str, create: bool = True) -> OutDir:
         """The directory ``name`` inside this one (made when missing, with ``create``)."""
@@ -107,6 +110,7 @@ class OutDir:
     def close(self) -> None:
         """Release the descriptor (idempotent)."""
         if self.fd >= 0:
+            SHOWN.pop(self.fd, None)
             os.close(self.fd)
             self.fd = -1
 
@@ -266,6 +270,14 @@ class OutDir:
     # ------------------------------------------------------------------ helpers
     def _open_regular(self, name: str, flags: int) -> int:
         path = self.path / name
+        try:  # refused before it is opened: opening a device or a FIFO can act
+            st = os.stat(_name(name), dir_fd=self.fd, follow_symlinks=False)
+            if not (stat.S_ISREG(st.st_mode) and st.st_nlink == 1):
+                raise OutputError(f"{path}: {_describe(st)}; only plain files belong here")
+            flags &= ~os.O_CREAT  # it exists: opened as the file just checked
+        except FileNotFoundError:
+            if flags & os.O_CREAT:
+                flags |= os.O_EXCL  # a new file: nothing may appear there in between
         try:
             fd = os.open(_name(name), flags | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
                          0o644, dir_fd=self.fd)  # fmt: skip
@@ -319,7 +331,11 @@ def check_tree(root: OutDir, max_entries: int = MAX_TREE_ENTRIES) -> int:
         if depth > MAX_TREE_DEPTH:
             raise OutputError(f"{path}: nested deeper than {MAX_TREE_DEPTH} directories")
         with os.scandir(fd) as it:
-            entries = list(it)
+            entries = []
+            for entry in it:  # counted as read: a folder of millions is not listed first
+                entries.append(entry)
+                if count + len(entries) > max_entries:
+                    raise OutputError(f"{root.path}: more than {max_entries} entries")
         for entry in entries:
             count += 1
             if count > max_entries:
@@ -340,10 +356,26 @@ def check_tree(root: OutDir, max_entries: int = MAX_TREE_ENTRIES) -> int:
 
 
 # ----------------------------------------------------------------------------- command outputs
-def _listing(d: OutDir, prefix: str = "") -> list[str]:
+_STAGING_RE = re.compile(r"\.staging-[A-Za-z0-9_-]+-([0-9]{1,10})-[0-9a-f]{8}")
+"""The name of a command's staging folder: the command, its pid, a random tag."""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def _listing(d: OutDir, prefix: str = "", skip: set[str] | None = None) -> list[str]:
     """Every file below ``d`` as a relative path (directories by their files; links refused)."""
     out = []
     for name in d.names():
+        if skip and name in skip:
+            continue
         kind = d.kind(name)
         if kind == "dir":
             with d.subdir(name, create=False) as sub:
@@ -460,13 +492,11 @@ def command_output(
         if owned.get(WHOLE, command) != command:
             raise OutputError(f"{path}: the output of {owned[WHOLE]}, not of {command}; give "
                               f"a new or empty --out directory")  # fmt: skip
-        for name in out.names():
-            if name.startswith(STAGING) and out.kind(name) == "dir":
-                out.remove(name)  # a killed command's staging: ours by its name and kind
+        stagings = {n for n in out.names() if _STAGING_RE.fullmatch(n) and out.kind(n) == "dir"}
         if WHOLE not in owned:
             foreign = [
                 rel
-                for rel in _listing(out)
+                for rel in _listing(out, skip=stagings)
                 if rel != MARKER and rel not in owned and not rel.endswith("/")
             ]  # an empty folder holds nothing to protect
             if foreign:
@@ -475,6 +505,9 @@ def command_output(
                     f"{path}: holds {foreign[0]}{more}, which no command of this package wrote "
                     f"there; give a new or empty --out directory"
                 )
+        for name in stagings:  # a killed command's staging (its pid gone): ours by its name
+            if not _alive(int(_STAGING_RE.fullmatch(name).group(1))):
+                out.remove(name)
         if whole:
             if owned and set(owned) != {WHOLE}:
                 raise OutputError(f"{path}: holds other commands' files; give a new or empty "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -10,6 +11,18 @@ import numpy as np
 
 from training.plumbing.outputs import save_figure, write_file
 from training.plumbing.safe_files import read_csv
+
+_MONITOR = re.compile(r"[0-9]{1,15}(\.[0-9]{1,6})?\.monitor\.csv")
+"""The monitor files a run writes: START.monitor.csv, START.K.monitor.csv."""
+
+
+def _int_list(text: str) -> list[int]:
+    """A JSON list of at most 1000 integers (``imitation.csv``'s student steps)."""
+    v = json.loads(text) if len(text) < 20_000 else None
+    if not isinstance(v, list) or not v or len(v) > 1000 or any(type(x) is not int for x in v):
+        raise ValueError("not a list of integers")
+    return v
+
 
 EVAL_COLUMNS = {"env_steps": int, "steps_mean": float, "steps_min": float, "return_mean": float}
 """The columns of a run's ``eval.csv`` that the figures read."""
@@ -107,8 +120,8 @@ def learning_curve(run: Path, path: Path) -> None:
     """
     plt = _mpl()
     imitation = run / "imitation.csv"
-    files = sorted((int(f.name.split(".")[0]), f) for f in run.glob("*.monitor.csv")
-                   if f.name.split(".")[0].isdigit())  # fmt: skip
+    names = (f for f in run.glob("*.monitor.csv") if _MONITOR.fullmatch(f.name))
+    files = sorted((int(f.name.split(".")[0]), f) for f in names)
     mon, x = [], []
     for start, f in files:  # <start step>.monitor.csv of each session
         rows = read_csv(f, {"r": float, "l": int, "steps_completed": int}, run, comment_lines=1)
@@ -119,7 +132,7 @@ def learning_curve(run: Path, path: Path) -> None:
     steps = np.array([r["steps_completed"] for r in mon])
     fig, axes = plt.subplots(1, 3 if imitation.exists() else 2, figsize=(16, 3.8))
     if imitation.exists():
-        im = read_csv(imitation, {"samples": int, "student_steps": json.loads}, run)
+        im = read_csv(imitation, {"samples": int, "student_steps": _int_list}, run)
         n = [r["samples"] for r in im]
         st = [r["student_steps"] for r in im]
         axes[0].plot(n, [np.mean(v) for v in st], "o-", label="student, mean of 5 episodes")

@@ -15,6 +15,7 @@ import errno
 import hashlib
 import io
 import json
+import math
 import os
 import struct
 import tomllib
@@ -34,6 +35,21 @@ MAX_HEADER_BYTES = 1 << 20
 """Largest safetensors header (1 MiB)."""
 MANIFEST_FILE = "manifest.json"
 """A snapshot's file sizes and SHA-256 hashes, written after every other file."""
+
+
+SHOWN: dict[int, Path] = {}
+"""Display paths of the directory descriptors the process holds (``/proc/self/fd/N`` -> the
+directory's name), for messages."""
+
+
+def shown(path: Path | str) -> Path:
+    """``path`` as a user named it: ``/proc/self/fd/N/...`` of a held directory -> its name."""
+    parts = Path(path).parts
+    if parts[:4] == ("/", "proc", "self", "fd") and len(parts) > 4 and parts[4].isdigit():
+        base = SHOWN.get(int(parts[4]))
+        if base is not None:
+            return base.joinpath(*parts[5:])
+    return Path(path)
 
 
 class UntrustedFileError(ValueError):
@@ -67,9 +83,9 @@ def read_bytes(path: Path, limit: int, root: Path | None = None) -> bytes:
     if root is not None:
         inside(root, path)
     try:
-        return _read_in(None, str(path), path, limit)
+        return _read_in(None, str(path), shown(path), limit)
     except FileNotFoundError:
-        raise UntrustedFileError(f"{path}: missing (or not a regular file)") from None
+        raise UntrustedFileError(f"{shown(path)}: missing (or not a regular file)") from None
 
 
 def read_toml(path: Path, root: Path | None = None) -> dict[str, Any]:
@@ -121,7 +137,7 @@ def read_csv(
                     raise ValueError(f"{k} = {raw[k]!r}")
                 row[k] = v
             rows.append(row)
-    except (ValueError, TypeError, OverflowError, csv.Error) as e:
+    except (ValueError, TypeError, OverflowError, RecursionError, csv.Error) as e:
         if isinstance(e, UntrustedFileError):
             raise
         raise UntrustedFileError(f"{path}: row {len(rows) + 2 + comment_lines}: a malformed "
@@ -173,7 +189,7 @@ def _npy_array(fh, name: str, max_bytes: int) -> tuple[np.ndarray, int]:
     ):
         raise ValueError("a malformed shape")
     dtype = np.dtype(_NPY_DTYPES[descr])
-    n_bytes = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    n_bytes = math.prod(shape) * dtype.itemsize
     if n_bytes > max_bytes:
         raise UntrustedFileError(f"{name} holds {n_bytes} bytes of data, more than {max_bytes}")
     data = fh.read(n_bytes)
@@ -292,10 +308,11 @@ def safetensors_header(
             dtype, shape, (a, b) = entry["dtype"], tuple(entry["shape"]), entry["data_offsets"]
             ok = (
                 dtype in _ST_DTYPES
+                and len(shape) <= 8
                 and all(type(d) is int and 0 <= d < 2**40 for d in (*shape, a, b))
                 and set(entry) == {"dtype", "shape", "data_offsets"}
             )
-            ok = ok and b - a == int(np.prod(shape, dtype=np.float64)) * _ST_DTYPES[dtype]
+            ok = ok and b - a == math.prod(shape) * _ST_DTYPES[dtype]
         except (TypeError, KeyError, ValueError):
             ok = False
         if not ok:
@@ -330,6 +347,17 @@ def load_safetensors(path: Path, data: bytes) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------- snapshots
+SNAPSHOT_FILES = {
+    "policy.safetensors": MAX_WEIGHTS_BYTES,
+    "optimizer.safetensors": MAX_WEIGHTS_BYTES,
+    "normalizer.npz": 1 << 20,
+    "state.json": MAX_TEXT_BYTES,
+    "data.npz": MAX_WEIGHTS_BYTES,
+    "demos.npz": MAX_WEIGHTS_BYTES,
+}
+"""The files a snapshot may hold, each with its largest size [bytes]."""
+
+
 class Snapshot:
     """A snapshot's files read once into memory, each checked against the manifest's hash.
 
@@ -370,7 +398,12 @@ def parse_json_object(data: bytes, path: Path) -> dict[str, Any]:
 def _read_in(dir_fd: int | None, name: str, path: Path, limit: int) -> bytes:
     import stat as st_
 
-    try:
+    try:  # the kind checked before it is opened: opening a device or a FIFO can act
+        pre = os.stat(name, dir_fd=dir_fd, follow_symlinks=False)
+        if st_.S_ISLNK(pre.st_mode):
+            raise UntrustedFileError(f"{path}: a symlink")
+        if not st_.S_ISREG(pre.st_mode):
+            raise UntrustedFileError(f"{path}: not a regular file")
         fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC,
                      dir_fd=dir_fd)  # fmt: skip
     except FileNotFoundError:
@@ -400,9 +433,10 @@ def read_snapshot(where: Path) -> Snapshot:
     snapshot, or no manifest: incomplete) or :class:`UntrustedFileError` (a link, an odd
     file, a size or hash that differs from the manifest).
     """
-    where = Path(where)
+    real = Path(where)
+    where = shown(real)
     try:
-        dfd = os.open(where, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
+        dfd = os.open(real, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
     except FileNotFoundError:
         raise FileNotFoundError(f"{where}: missing") from None
     except OSError as e:
@@ -416,14 +450,16 @@ def read_snapshot(where: Path) -> Snapshot:
             raise UntrustedFileError(f"{where}: {len(entries)} files (a snapshot has at most 16)")
         files, total = {}, 0
         for name, meta in entries.items():
+            if name not in SNAPSHOT_FILES:
+                raise UntrustedFileError(f"{where / MANIFEST_FILE}: lists {name[:40]!r}, not a "
+                                         f"snapshot file {sorted(SNAPSHOT_FILES)}")  # fmt: skip
             p = where / name
-            if not isinstance(meta, dict) or not isinstance(meta.get("bytes"), int):
+            if not isinstance(meta, dict) or type(meta.get("bytes")) is not int:
                 raise UntrustedFileError(f"{p}: a malformed manifest entry")
-            if "/" in name or name in (".", ".."):
-                raise UntrustedFileError(f"{p}: not a plain file name")
             total += meta["bytes"]
-            if meta["bytes"] > MAX_WEIGHTS_BYTES or total > MAX_NPZ_BYTES:
-                raise UntrustedFileError(f"{p}: the manifest declares more than allowed")
+            if not 0 <= meta["bytes"] <= SNAPSHOT_FILES[name] or total > MAX_NPZ_BYTES:
+                raise UntrustedFileError(f"{p}: the manifest declares {meta['bytes']} bytes, "
+                                         f"more than allowed")  # fmt: skip
             data = _read_in(dfd, name, p, meta["bytes"])
             if len(data) != meta["bytes"]:
                 raise UntrustedFileError(f"{p}: {len(data)} bytes, the manifest says "
