@@ -23,7 +23,6 @@ from .modes import EventCode
 from .observation import observation_space
 from .period import EnvBuffers
 from .perturbations import Perturbations
-from .restarts import RestartPool
 from .rewards import (
     REWARD_KINDS,
     REWARD_TERMS,
@@ -34,7 +33,7 @@ from .rewards import (
 )
 from .settings import EnvSettings
 from .simulator import SimState, evaluate
-from .starts import check_start_state, draw_starts, start_slots
+from .starts import check_start_state, draw_starts
 from .state import FS_ROOT, FS_T, ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
 from .tracking import Tracking
 
@@ -70,9 +69,7 @@ class EnvCore:
         """Allocate the rows' buffers, clock, tracking task and perturbations."""
         s, p, a = settings, settings.physics, settings.action
         self.settings, self.n = s, n
-        self.observation_space = observation_space(
-            s.observation.phase_obs, s.observation.reference_obs
-        )
+        self.observation_space = observation_space(s.observation.phase_obs)
         self.clock = ContactClock(n, p.dt) if s.needs_clock else None
         self.tracking = Tracking(n, s, self.clock) if (s.needs_reference or a.pd) else None
         env_weights = (s.reward.weights if s.reward.kind == "env"
@@ -90,8 +87,7 @@ class EnvCore:
         self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
         self._track = s.reward.kind == "tracking"
         self.gait = GaitReward(s.reward, p.dt, n) if s.reward.kind == "gait" else None
-        self.restarts = RestartPool(s.start.restarts) if s.start.restarts > 0 else None
-        self._count_steps = self._track or self.gait is not None or self.restarts is not None
+        self._count_steps = self._track or self.gait is not None
         self._max_model_t = s.max_model_time_s
         self._pd = a.pd
         self._pushes = s.perturbations.push_impulse_ns is not None
@@ -121,20 +117,7 @@ class EnvCore:
             draw_starts(*args)
             if self.clock is not None:
                 self.clock.start(idx, self.sim.ist[idx, ST_MODE], self.sim.qd[idx])
-        if self.restarts is not None:
-            self._restart(idx, rngs)
         self.perturb.start(idx, rngs)
-
-    def _restart(self, idx: np.ndarray, rngs) -> None:
-        """Rows of ``idx`` that draw a restart start at states of the pool (:mod:`.restarts`)."""
-        chosen, picks = self.restarts.draw(rngs)
-        if not chosen.any():
-            return
-        p, pool, slots = self.settings.physics, self.restarts, np.asarray(idx)[chosen]
-        self.sim.q[slots], self.sim.qd[slots] = pool.q[picks], pool.qd[picks]
-        start_slots(p.params, p.options, self.sim, slots, pool.mode[picks])
-        if self.clock is not None:
-            self.clock.start(slots, self.sim.ist[slots, ST_MODE], self.sim.qd[slots])
 
     def set_starts(self, idx: np.ndarray, state: SimState, rngs) -> None:
         """Rows ``idx`` start at the given (checked) ``state`` (``reset(options=...)``)."""
@@ -193,8 +176,6 @@ class EnvCore:
             if skip is not None:
                 held[skip] = False
             terminated |= held
-        if self.restarts is not None:  # the states just after completed steps
-            self.restarts.record(sim, np.flatnonzero((sim.ist[:, ST_STEPS] > steps0) & ~terminated))
         if self._track:
             track = self.tracking.reward(sim.q, sim.qd, self.hip, sim.ist[:, ST_STEPS] - steps0,
                                          ~terminated)  # fmt: skip
@@ -260,8 +241,6 @@ class EnvCore:
             parts = [obs]
             if self.settings.observation.phase_obs:
                 parts.append(self.clock.features())
-            if self.settings.observation.reference_obs:
-                parts.append(self.tracking.observation())
             obs = np.concatenate(parts, axis=1) if len(parts) > 1 else obs
         if self._noisy:
             obs = self.perturb.observe(obs, rngs, range(self.n) if rows is None else rows)

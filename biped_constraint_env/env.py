@@ -164,8 +164,6 @@ class ConstrainedBipedEnv(gym.Env):
     | reference | None | | the reference walk: "midstride", "rest", "own" (each start its |
     | | | | own kind's recording) or an npz path (None: the start's own; "own" if mixed) |
     | rsi | 0.0 | | fraction of resets at reference states (reference-state starts) |
-    | restarts | 0.0 | | fraction of resets at states this env visited just after a |
-    | | | | completed step (its own pool; :mod:`.restarts`) |
     | action | "torque" | | "torque", "pd" (PD targets in [-1, 1]^5, below) or a dict: |
     | | | | {"kind": "pd", "around": "fixed" or "reference", "range": 1.0 [rad], |
     | | | | "pose": Fig. 2 q1..q5 [rad], "offset": zeros [rad], "gain_scale": 1.0 |
@@ -174,7 +172,6 @@ class ConstrainedBipedEnv(gym.Env):
     | perturbations | None | | dict: pushes, model error, sensor noise, action delay |
     |  |  |  | (:mod:`.perturbations`; one kwarg for the group: eight options that only |
     |  |  |  | robustness studies set, validated together) |
-    | reference_obs | False | | append the reference's q and q-dot at the clock (12) |
     | render_mode | None | | "rgb_array" or "human" |
 
     ## Learning
@@ -193,9 +190,8 @@ class ConstrainedBipedEnv(gym.Env):
     at every physics step ``action["dt"]`` inside it, as legged-robot envs do (decimation; 20 ms
     periods apply their targets through four 5 ms PD updates). ``info["torque"]`` gives the
     period's time-mean torque; the control cost is the time mean of sum(tau^2).
-    ``reference_obs`` shows the reference to the policy. The clock restarts at every model
-    switch; a start follows its own reference's first step (rest with "rest", mid-stride with
-    "midstride").
+    The clock restarts at every model switch; a start follows its own reference's first step
+    (rest with "rest", mid-stride with "midstride").
 
     ``reward="gait"`` (:mod:`.gait`) needs no recorded motion: kernels of the period's hip speed
     against a commanded speed, of the hip height, of the swing ankle's forward speed while the
@@ -238,7 +234,10 @@ class ConstrainedBipedEnv(gym.Env):
       (the PD torque and pushes appear in the reset's ``info`` too, zero).
       Added: ``reward="gait"`` and the reward's ``targets`` (the cadence target one
       value or one per model) and ``gated``; ``start="stride"``; ``max_model_time_s``;
-      ``restarts``.
+      ``restarts``. Removed (no policy or result used them; each refused by name):
+      ``restarts`` and ``reference_obs``. Changed: the control period is at least 2 ms, the
+      integration steps at least 50 us, ``step_tol`` at least 1e-8 and PD updates at least
+      0.5 ms (bounds on the work of an episode); ``info["root_y"]`` added.
 
     Example:
         >>> import gymnasium as gym

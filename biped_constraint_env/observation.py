@@ -114,22 +114,13 @@ def nb_observe(CHS, SCS, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
         )
 
 
-N_REFERENCE_OBS = 2 * N_LINKS
-"""Entries ``reference_obs`` appends (:mod:`.tracking`): the reference's q and q-dot."""
-
-
-def observation_space(phase_obs: bool = False, reference_obs: bool = False) -> spaces.Box:
+def observation_space(phase_obs: bool = False) -> spaces.Box:
     """The observation Box (bounds in the env docstring's table).
 
-    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended, then with
-    ``reference_obs`` the reference's q (6, +-pi) and q-dot (6, +-OBS_RATE_LIMIT_RAD_S).
+    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended.
     """
     low, high = [OBS_LOW], [OBS_HIGH]
     if phase_obs:
         low.append(PHASE_LOW)
         high.append(PHASE_HIGH)
-    if reference_obs:
-        ref_high = np.concatenate([np.full(N_LINKS, np.pi), np.full(N_LINKS, OBS_RATE_LIMIT_RAD_S)])
-        low.append(-ref_high)
-        high.append(ref_high)
     return spaces.Box(np.concatenate(low), np.concatenate(high), dtype=np.float64)

@@ -74,13 +74,12 @@ class PhysicsSettings:
 
 @dataclass(frozen=True)
 class StartSettings:
-    """The start distribution: kind, rest posture, reset noise, rsi and restart fractions."""
+    """The start distribution: kind, rest posture, reset noise and the rsi fraction."""
 
     start: str
     posture: tuple[float, ...]
     reset_noise_scale: float
     rsi: float
-    restarts: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -135,10 +134,9 @@ class ActionSettings:
 
 @dataclass(frozen=True)
 class ObservationSettings:
-    """Entries appended to the 24 base entries: the contact clock's phase, the reference."""
+    """Entries appended to the 24 base entries: the contact clock's phase."""
 
     phase_obs: bool
-    reference_obs: bool
 
 
 @dataclass(frozen=True)
@@ -167,7 +165,6 @@ class EnvSettings:
         return (
             self.reward.kind == "tracking"
             or self.start.rsi > 0
-            or self.observation.reference_obs
             or (self.action.pd and self.action.around == "reference")
         )
 
@@ -314,9 +311,7 @@ def make_settings(
     reward: str | dict | None = None,
     reference: str | None = None,
     rsi: float | None = None,
-    restarts: float = 0.0,
     action: str | dict | None = None,
-    reference_obs: bool = False,
     perturbations: dict[str, Any] | None = None,
     **unknown: Any,
 ) -> EnvSettings:
@@ -326,6 +321,9 @@ def make_settings(
     given explicitly overrides the task's (``action`` and ``reward`` dicts merge onto the
     task's of the same kind).
     """
+    for key in unknown:
+        if key in RETIRED:
+            raise ValueError(f"{key}: {RETIRED[key]}")
     check_names("argument(s) of ConstrainedBiped-v0", unknown, ENV_ARGUMENTS + ("render_mode",))
     params = paper_biped() if params is None else params
     t = resolve_task(task, preset=preset, dt=dt, stop_at_switch=stop_at_switch, start=start,
@@ -349,13 +347,10 @@ def make_settings(
             tuple(q0.tolist()),
             noise,
             check_real("rsi", t["rsi"], 0.0, 1.0),
-            check_real("restarts", restarts, 0.0, 1.0),
         ),  # fmt: skip
         action=_action_settings(action, task_action, torque_limit_nm, out_of_range, dt),
         reward=reward_settings(_with_kind(reward, TASKS[task].get("reward", "env")), weights),
-        observation=ObservationSettings(
-            check_bool("phase_obs", t["phase_obs"]), check_bool("reference_obs", reference_obs)
-        ),
+        observation=ObservationSettings(check_bool("phase_obs", t["phase_obs"])),
         perturbations=perturbation_settings(perturbations),
         reference=_reference(reference, start_kind),
         fall_hip_height_m=check_fall_height(fall_hip_height_m),
@@ -369,6 +364,14 @@ def _check_model_time(max_model_time_s) -> float | None:
         return None
     return check_real("max_model_time_s", max_model_time_s, 0.0, 1e3, low_open=True, unit=" [s]")
 
+
+RETIRED = {
+    "restarts": "removed (starts at states the env visited itself never produced a walker; "
+    "docs/from_scratch.md)",
+    "reference_obs": "removed (no committed policy saw the reference in its input; "
+    "docs/from_scratch.md)",
+}
+"""Arguments the env no longer takes, each refused with why (the package is unreleased)."""
 
 ENV_ARGUMENTS: tuple[str, ...] = tuple(
     name for name in make_settings.__code__.co_varnames[: make_settings.__code__.co_argcount]

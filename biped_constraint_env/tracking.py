@@ -15,10 +15,8 @@ phase. The default env uses none of it.
   gives each term.
 * ``rsi`` (reference-state initialisation): that fraction of the resets starts at a recorded
   reference state drawn uniformly (its clock with it); the others draw the env's ``start``.
-* ``reference_obs=True``: the reference's q and q-dot at the clock are appended to the
-  observation (12 entries, after the phase entries of ``phase_obs``), so that a policy sees
-  its target at run time. Without it a policy sees the phase only (``phase_obs``: the
-  first-step flag and the time in the model, which with the model one-hot is the clock).
+* A policy sees the phase only (``phase_obs``: the first-step flag and the time in the
+  model, which with the model one-hot is the clock), never the reference itself.
 * ``action={"kind": "pd", ...}``: the action in [-1, 1]^5 sets joint targets
   ``base + offset + range * a`` [rad] for q1..q5, where ``base`` is a fixed ``pose``
   (``around="fixed"``, the default: no reference at run time) or the reference's q at the
@@ -243,10 +241,6 @@ class Tracking:
         return pd_config(a.pd_substeps, a.torque_limit_nm, a.range, a.kp, a.kd)
 
     # ------------------------------------------------------------------ observation, reward
-    def observation(self) -> np.ndarray:
-        """(n, 12): the reference's q and q-dot at the clock (``reference_obs``)."""
-        return self.rows()[:, : 2 * N_LINKS]
-
     def reward(self, q, qd, hip, steps, alive) -> np.ndarray:
         """(n, 6): the tracking reward's terms (the registry's order) and their sum.
 

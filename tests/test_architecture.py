@@ -1,7 +1,7 @@
 """One direction of dependency: jit (how the core is compiled) and validation (argument
 checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> the simulator
 (state -> options -> stepper -> advance -> simulator, its Python API) -> the env's parts
-(tasks, actions, starts, restarts, rewards, gait, observation, reference, perturbations) ->
+(tasks, actions, starts, rewards, gait, observation, reference, perturbations) ->
 settings (all the env's arguments, validated once) -> tracking -> period (the compiled control
 period) -> core (N rows around it: starts, reasons, rewards, info) -> env (its one-row case) ->
 vector_env.
@@ -36,7 +36,6 @@ LAYERS = [
     "tasks",
     "actions",
     "starts",
-    "restarts",
     "rewards",
     "gait",
     "clock",
@@ -77,3 +76,39 @@ def test_core_never_imports_gymnasium():
         path = PKG / f"{module}.py"
         if path.exists():
             assert "gymnasium" not in path.read_text(), module
+
+
+def _training_graph() -> dict[str, set[str]]:
+    """training/'s modules and the training modules each imports (function-level too)."""
+    root = PKG.parent / "training"
+    mods = {".".join(p.relative_to(root.parent).with_suffix("").parts): p
+            for p in root.rglob("*.py")}  # fmt: skip
+    graph = {}
+    for name, path in mods.items():
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                deps.add(node.module)
+                deps.update(f"{node.module}.{a.name}" for a in node.names)
+            elif isinstance(node, ast.Import):
+                deps.update(a.name for a in node.names)
+        graph[name] = {d.removesuffix(".__init__") for d in deps if d in mods} - {name}
+    return graph
+
+
+def test_training_has_no_import_circle():
+    graph = _training_graph()
+    state: dict[str, int] = {}
+
+    def visit(m, path):
+        if state.get(m) == 1:
+            raise AssertionError(f"import circle: {' -> '.join([*path, m])}")
+        if state.get(m) == 2:
+            return
+        state[m] = 1
+        for d in sorted(graph.get(m, ())):
+            visit(d, [*path, m])
+        state[m] = 2
+
+    for m in sorted(graph):
+        visit(m, [])

@@ -129,7 +129,7 @@ def test_committed_50hz_policies_walk_at_20_ms_with_what_they_say_in_the_loop(na
     s = cfg.settings()
     assert s.dt == 0.02 and s.action.pd and s.action.pd_substeps == 4
     assert s.action.around == ("reference" if name == "ppo_walker_50hz" else "fixed")
-    assert not s.observation.reference_obs and s.observation.phase_obs
+    assert s.observation.phase_obs
     for start in starts:
         kw = {**cfg.env_kwargs(), "start": start}
         (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id, episode_s=30)
@@ -176,7 +176,7 @@ def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
     assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
     s = cfg.settings()
     assert s.action.kind == "torque" and s.dt == 0.02 and s.physics.preset == "default"
-    assert s.observation.phase_obs and not s.observation.reference_obs and s.start.rsi == 0.0
+    assert s.observation.phase_obs and s.start.rsi == 0.0
     for start in ("rest", "midstride"):
         kw = {**cfg.env_kwargs(), "start": start}
         (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id, episode_s=30)

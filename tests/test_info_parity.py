@@ -20,7 +20,7 @@ OPTIONS = [
     },
     {"task": "paper"},
     {"phase_obs": True, "start": "mixed"},
-    {"reward": "tracking", "rsi": 0.5, "reference_obs": True, "phase_obs": True},
+    {"reward": "tracking", "rsi": 0.5, "phase_obs": True},
     {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}},
     {"action": {"kind": "pd", "around": "reference"}, "reward": "tracking", "dt": 0.01},
     {"perturbations": {"push_impulse_ns": -0.3, "push_at_s": 0.1, "obs_noise": (1e-3, 1e-2)}},

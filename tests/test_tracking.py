@@ -12,8 +12,15 @@ from biped_constraint_env.rewards import REWARD_KINDS
 from biped_constraint_env.settings import PD_FIXED_POSE_RAD
 
 TRACK = {"reward": "tracking", "rsi": 0.5, "action": {"kind": "pd", "around": "reference",
-         "range": 0.5}, "phase_obs": True, "reference_obs": True}  # fmt: skip
+         "range": 0.5}, "phase_obs": True}  # fmt: skip
 TERMS = {t.name: t for t in REWARD_KINDS["tracking"]}
+
+
+def _at_clock(env) -> np.ndarray:
+    """The reference's q and q-dot at the env's contact clock (row 0)."""
+    return env.core.tracking.rows()[0, :12]
+
+
 KERNEL_TERMS = tuple(t for t in TERMS if TERMS[t].kernel is not None)
 TRACK_KEYS = tuple(f"reward_{t}" for t in TERMS)
 
@@ -136,7 +143,7 @@ def test_tracking_options_single_equals_batched(kw):
 
 
 def test_reference_state_starts_are_recorded_states_with_their_clock():
-    env = ConstrainedBipedEnv(rsi=1.0, phase_obs=True, reference_obs=True)
+    env = ConstrainedBipedEnv(rsi=1.0, phase_obs=True)
     ref = load_reference("midstride")
     rows = np.concatenate([ref.q, ref.qd], axis=1)
     for seed in range(20):
@@ -150,9 +157,9 @@ def test_reference_state_starts_are_recorded_states_with_their_clock():
         assert (c.first[0], c.mode[0], c.j[0]) == (bool(ref.first[k]), ref.mode[k], ref.j[k])
         first = ref.step[k] == 0  # the recording's first step, else the gait's phase
         assert env.core.tracking.first[0] == first
-        np.testing.assert_array_equal(obs[26:], ref.lookup(first, ref.mode[k], ref.j[k])[:12])
+        np.testing.assert_array_equal(_at_clock(env), ref.lookup(first, ref.mode[k], ref.j[k])[:12])
         if first or ref.step[k] == ref.gait_step:
-            np.testing.assert_array_equal(obs[26:], rows[k])
+            np.testing.assert_array_equal(_at_clock(env), rows[k])
 
 
 def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
@@ -171,17 +178,18 @@ def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
 
 def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_state():
     # a mid-stride start with the mid-stride reference: the teacher's walk from such a start
-    env = ConstrainedBipedEnv(reference_obs=True, phase_obs=True)
+    env = ConstrainedBipedEnv(reward="tracking", phase_obs=True)
     obs, _ = env.reset(seed=0)
     assert env.core.tracking.first[0] and env.core.clock.j[0] == 0 and env.core.clock.mode[0] == 2
-    np.testing.assert_array_equal(obs[26:], env.core.tracking.ref.tables[(1, 2)][0, :12])
+    np.testing.assert_array_equal(_at_clock(env), env.core.tracking.ref.tables[(1, 2)][0, :12])
     for _ in range(400):  # the first step completes: the gait's phases from then on
         obs, _, term, _, info = env.step(np.zeros(5))
         if info["steps_completed"] or term:
             break
     assert not env.core.tracking.first[0] or term
     # a mid-stride start with the rest reference: the gait's nearest state of model 2
-    env = ConstrainedBipedEnv(start="mixed", reference="rest", reference_obs=True, phase_obs=True)
+    env = ConstrainedBipedEnv(start="mixed", reference="rest", reward="tracking",
+                              phase_obs=True)  # fmt: skip
     for seed in range(10):
         obs, info = env.reset(seed=seed)
         if info["mode"] == 2:
@@ -189,7 +197,7 @@ def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_sta
     table = env.core.tracking.ref.tables[(0, 2)]
     j = int(np.argmin(np.sum((table[:, :6] - env.state.q) ** 2, axis=1)))
     assert not env.core.tracking.first[0] and env.core.clock.j[0] == j
-    np.testing.assert_array_equal(obs[26:], table[j, :12])
+    np.testing.assert_array_equal(_at_clock(env), table[j, :12])
     assert obs[25] == pytest.approx(j * env.dt)  # the time in the model follows the clock
     # a start at rest with the rest reference: its first step
     env.reset(seed=0, options={"q": np.array([0.0, -0.1, 0.1, -0.3, -0.4, 0.7])})
@@ -199,7 +207,7 @@ def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_sta
 def test_mixed_starts_follow_the_recording_of_their_own_kind():
     """``start="mixed"`` (``reference="own"``): a start at rest follows the rest recording's
     first step, a mid-stride start the mid-stride recording's."""
-    env = ConstrainedBipedEnv(start="mixed", reference_obs=True, phase_obs=True)
+    env = ConstrainedBipedEnv(start="mixed", reward="tracking", phase_obs=True)
     assert env.settings.reference == "own"
     tr = env.core.tracking
     kinds = {ref.start: i for i, ref in enumerate(tr.refs)}
@@ -210,11 +218,11 @@ def test_mixed_starts_follow_the_recording_of_their_own_kind():
         seen.add(kind)
         ref = tr.refs[kinds[kind]]
         assert tr.which[0] == kinds[kind] and tr.first[0] and env.core.clock.j[0] == 0
-        np.testing.assert_array_equal(obs[26:], ref.tables[(1, info["mode"])][0, :12])
+        np.testing.assert_array_equal(_at_clock(env), ref.tables[(1, info["mode"])][0, :12])
     assert seen == {"rest", "midstride"}
     venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
-                        start="mixed", reference_obs=True, phase_obs=True, rsi=0.5)  # fmt: skip
-    envs = [gym.make("ConstrainedBiped-v0", start="mixed", reference_obs=True, phase_obs=True,
+                        start="mixed", reward="tracking", phase_obs=True, rsi=0.5)  # fmt: skip
+    envs = [gym.make("ConstrainedBiped-v0", start="mixed", reward="tracking", phase_obs=True,
                      rsi=0.5) for _ in range(4)]  # fmt: skip
     vo, _ = venv.reset(seed=3)
     np.testing.assert_array_equal(vo, [e.reset(seed=3 + i)[0] for i, e in enumerate(envs)])
@@ -222,7 +230,7 @@ def test_mixed_starts_follow_the_recording_of_their_own_kind():
 
 def test_default_env_is_unchanged_by_the_tracking_options_defaults():
     a = ConstrainedBipedEnv()
-    b = ConstrainedBipedEnv(reward="env", action="torque", rsi=0.0, reference_obs=False)
+    b = ConstrainedBipedEnv(reward="env", action="torque", rsi=0.0)
     assert a.core.tracking is None and a.core.clock is None
     oa, _ = a.reset(seed=4)
     ob, _ = b.reset(seed=4)

@@ -51,9 +51,8 @@ from training.ppo_config import REPORT_EPISODES, REPORT_SEED_OFFSET
 from training.rollouts import (
     COMPARE_PUSH,
     TABLE_HEADER,
-    initiation,
+    batched_row,
     run_episodes,
-    run_episodes_batched,
     summarize,
     table_row,
 )
@@ -173,17 +172,6 @@ def controller_batch(spec: str, n: int):
         return np.stack([c(o) for c, o in zip(ctrls, obs, strict=True)])
 
     return act
-
-
-def batched_row(label: str, act, env_kw: dict, seeds, env_id: str, rest: bool = False) -> dict:
-    """A row of ``seeds`` episodes run at once in the batched env (initiation from rest)."""
-    t0 = time.time()
-    eps = run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S, progress=label)
-    row = summarize(label, eps)
-    if rest:
-        row["initiation"] = initiation(row["episodes"], MIN_STEPS_FROM_REST)
-    print(f"{table_row(row)} ({time.time() - t0:.0f} s)", flush=True)
-    return row
 
 
 def _rest_rows(batch, cfg, seeds) -> tuple[list[dict], str]:

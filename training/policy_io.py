@@ -559,7 +559,7 @@ def build_policy(cfg, observation_space=None):
 
     if observation_space is None:
         o = cfg.settings().observation
-        observation_space = env_obs_space(o.phase_obs, o.reference_obs)
+        observation_space = env_obs_space(o.phase_obs)
     act_space = spaces.Box(-1.0, 1.0, (5,), np.float32)
     return ActorCriticPolicy(
         observation_space, act_space, lambda _: 0.0, use_sde=cfg.use_sde, **cfg.policy_kwargs()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -17,17 +18,19 @@ import numpy as np
 class PPOConfig:
     """PPO settings (numbers that differ from SB3's defaults say why)."""
 
+    RETIRED: ClassVar[dict[str, str]] = {
+        "curriculum_env": "removed with curriculum_steps (a curriculum of lenient checks never "
+        "produced a walker; docs/from_scratch.md)",
+        "curriculum_steps": "removed with [curriculum_env] (a curriculum of lenient checks never "
+        "produced a walker; docs/from_scratch.md)",
+    }
+
     env_id: str = "ConstrainedBiped-v0"  # Gymnasium id of the env
     env: dict = field(default_factory=dict)  # [env] table: gym.make's keyword arguments, the
     # env the policy runs in (evaluations start as it does: no reference-state starts);
     # flags: --env KEY=VALUE ... (TOML values) on top of the file's table
     train_env: dict = field(default_factory=dict)  # [train_env] table: what the training env
     # changes on top of [env] (reference-state starts, pushes, randomised models...)
-    curriculum_env: dict = field(default_factory=dict)  # [curriculum_env] table: what the
-    # training env changes on top of [env] and [train_env] in the first curriculum_steps env
-    # steps (e.g. strict = false: lenient contact checks); the rest of the training, and every
-    # evaluation, use the env without it
-    curriculum_steps: int = 0  # env steps of training with [curriculum_env] (0: none)
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
@@ -118,15 +121,12 @@ class PPOConfig:
         from biped_constraint_env.reference import OWN_REFERENCE, REFERENCES
         from biped_constraint_env.settings import make_settings
 
-        if bool(self.curriculum_env) != (self.curriculum_steps > 0):
-            raise ValueError("--curriculum-steps and [curriculum_env] go together: "
-                             "give both or neither")  # fmt: skip
-        for table in ("env", "train_env", "curriculum_env"):
+        for table in ("env", "train_env"):
             if "render_mode" in getattr(self, table):
                 raise ValueError(f"[{table}] render_mode is not a setting of a config (the "
                                  f"commands render their own figures)")  # fmt: skip
         # shipped references only: a config names no file
-        for table in ("env", "train_env", "curriculum_env"):
+        for table in ("env", "train_env"):
             ref = getattr(self, table).get("reference")
             if ref is not None and ref not in (*REFERENCES, OWN_REFERENCE):
                 raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES} "
@@ -135,7 +135,6 @@ class PPOConfig:
         for name, kwargs in (
             ("env", self.env_kwargs()),
             ("train_env", self.train_env_kwargs()),
-            ("curriculum_env", self.train_env_kwargs(curriculum=True)),
         ):
             try:
                 make_settings(**kwargs)
@@ -174,12 +173,9 @@ class PPOConfig:
         """
         return {**self.env, "rsi": 0.0}
 
-    def train_env_kwargs(self, curriculum: bool = False) -> dict:
-        """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top.
-
-        With ``curriculum``, ``[curriculum_env]`` on top of both (the first env steps' env).
-        """
-        return {**self.env, **self.train_env, **(self.curriculum_env if curriculum else {})}
+    def train_env_kwargs(self) -> dict:
+        """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top."""
+        return {**self.env, **self.train_env}
 
     def settings(self):
         """The validated settings of the env the policy runs in (:mod:`biped_constraint_env`)."""
@@ -223,16 +219,13 @@ class PPOConfig:
             what = "network alone (PD targets about a fixed pose)"
         else:
             what = "network alone (torques)"
-        if s.observation.reference_obs:
-            what += ", the reference state in its input"
         return what
 
     def obs_dim(self) -> int:
-        """The observation's length (24; + 2 phase entries; + 12 reference entries)."""
+        """The observation's length (24; + 2 phase entries)."""
         from biped_constraint_env.observation import observation_space
 
-        o = self.settings().observation
-        return observation_space(o.phase_obs, o.reference_obs).shape[0]
+        return observation_space(self.settings().observation.phase_obs).shape[0]
 
     def policy_kwargs(self) -> dict:
         """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.
@@ -275,7 +268,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
     ("bc_ankle_weight", 0.0, 1e6), ("log_std_joints", -20.0, 5.0), ("action_std_nm", 0.0, 150.0),
     ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
-    ("curriculum_steps", 0, _BIG), ("stop_min_steps", 0, 100_000), ("stop_evals", 1, 1000),
+    ("stop_min_steps", 0, 100_000), ("stop_evals", 1, 1000),
 )  # fmt: skip
 
 

@@ -47,17 +47,19 @@ def conditions(reset_noise: float) -> list[tuple[str, str, dict]]:
 
 def run(make_actor, env_kwargs: dict, seeds, env_id: str, label: str) -> list[dict]:
     """Every condition's row (``make_actor()``: a fresh batch actor per condition)."""
-    from training.evaluate import batched_row
+    from training.rollouts import batched_row
 
     rows = []
     from biped_constraint_env.settings import make_settings
 
     noise = make_settings(**env_kwargs).start.reset_noise_scale
-    for group, name, extra in conditions(noise):
+    todo = conditions(noise)
+    for k, (group, name, extra) in enumerate(todo, 1):
         kw = {**env_kwargs, **extra}
         if "perturbations" in extra and "perturbations" in env_kwargs:
             kw["perturbations"] = {**env_kwargs["perturbations"], **extra["perturbations"]}
-        row = batched_row(f"{label}, {name}", make_actor(), kw, seeds, env_id)
+        row = batched_row(f"{label}, {name}", make_actor(), kw, seeds, env_id,
+                          progress=f"[{k}/{len(todo)}] {name}")  # fmt: skip
         dv = [abs(v) for e in row["episodes"] for v in e.get("push_dv_m_s", [])]
         row.update(group=group, condition=name,
                    push_dv_mean_m_s=float(np.mean(dv)) if dv else None)  # fmt: skip

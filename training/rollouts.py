@@ -328,3 +328,25 @@ def com_and_cop(env) -> tuple[np.ndarray, float]:
     y = np.array([pts["stance_toe"][0], pts["stance_heel"][0], pts[point][0]])
     cop = float((f * y).sum() / f.sum()) if f.sum() > 1e-9 else float("nan")
     return com, cop
+
+
+def batched_row(
+    label: str, act, env_kw: dict, seeds, env_id: str, rest: bool = False, progress: str = ""
+) -> dict:
+    """A row of ``seeds`` report episodes (30 s) run at once in the batched env, printed.
+
+    ``rest``: with the gait-initiation summary (:func:`initiation`). ``progress``: the
+    progress bar's label (default: ``label``).
+    """
+    import time
+
+    from training.stats import EPISODE_S, MIN_STEPS
+
+    t0 = time.time()
+    eps = run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S,
+                               progress=progress or label)  # fmt: skip
+    row = summarize(label, eps)
+    if rest:
+        row["initiation"] = initiation(row["episodes"], MIN_STEPS)
+    print(f"{table_row(row)} ({time.time() - t0:.0f} s)", flush=True)
+    return row

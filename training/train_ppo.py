@@ -497,8 +497,6 @@ def write_settings(run: OutDir, cfg: PPOConfig) -> None:
 
     data = {"env": cfg.settings().as_dict(),
             "train_env": make_settings(**cfg.train_env_kwargs()).as_dict()}  # fmt: skip
-    if cfg.curriculum_steps > 0:
-        data["curriculum_env"] = make_settings(**cfg.train_env_kwargs(curriculum=True)).as_dict()
     run.write("env_settings.json", json.dumps(data, indent=1) + "\n")
 
 
@@ -600,23 +598,22 @@ def training_env(
     seed: int,
     monitor_file: Path | None = None,
     env_threads=None,
-    curriculum: bool = False,
 ):
     """The training env of a config: (VecMonitor of the SB3 VecEnv, VecNormalize over it).
 
-    The config's training env options (with ``rsi``; with ``curriculum`` its
-    ``[curriculum_env]`` too), its time limit and action map; ``env_threads`` overrides
+    The config's training env options (with ``rsi``), its time limit and action map;
+    ``env_threads`` overrides
     ``cfg.env_threads``. With a teacher the policy normalises its observations itself (fixed
     statistics), so VecNormalize normalises only the returns.
     """
     from stable_baselines3.common.vec_env import VecNormalize
 
-    venv = _monitored_env(cfg, seed, monitor_file, env_threads, curriculum)
+    venv = _monitored_env(cfg, seed, monitor_file, env_threads)
     vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
     return venv, vecnorm
 
 
-def _monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads, curriculum: bool):
+def _monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads):
     """The config's SB3 VecEnv under a VecMonitor (:func:`training_env`'s inner env)."""
     from stable_baselines3.common.vec_env import VecMonitor
 
@@ -625,7 +622,7 @@ def _monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads, curricu
     venv = make_sb3_vec_env(
         cfg.n_envs,
         seed,
-        cfg.train_env_kwargs(curriculum),
+        cfg.train_env_kwargs(),
         cfg.vec,
         cfg.env_id,
         cfg.action_map(),
@@ -654,37 +651,6 @@ def _monitor_file(run: OutDir, start: int) -> Path:
         except FileExistsError:
             continue
     raise UntrustedFileError(f"{run.path}: 1000 monitor files of step {start} already")
-
-
-def _curriculum(cfg: PPOConfig, run: OutDir, vecnorm, seed: int, active: bool):
-    """A callback: after ``cfg.curriculum_steps`` env steps the training env drops its curriculum.
-
-    ``active``: whether the training env has ``[curriculum_env]`` now. At the switch, a new env
-    without it, under the same VecNormalize statistics; its episodes start afresh after the
-    update of the last curriculum rollout.
-    """
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class Curriculum(BaseCallback):
-        def __init__(self):
-            super().__init__()
-            self.active = active
-
-        def _on_step(self) -> bool:
-            return True
-
-        def _on_rollout_end(self) -> None:
-            if self.active and self.num_timesteps >= cfg.curriculum_steps:
-                vecnorm.venv.close()
-                vecnorm.venv = _monitored_env(cfg, seed, _monitor_file(run, self.num_timesteps),
-                                              None, curriculum=False)  # fmt: skip
-                self.active = False
-                self.model._last_obs = vecnorm.reset()
-                self.model._last_episode_starts = np.ones(cfg.n_envs, bool)
-                print(f"[curriculum] {self.num_timesteps} env steps: the training env without "
-                      f"{cfg.curriculum_env} from now on", flush=True)  # fmt: skip
-
-    return Curriculum()
 
 
 _RUN: list[Path] = []
@@ -754,18 +720,14 @@ def _main(cfg: PPOConfig, run: OutDir, extend: bool = False) -> int:
             print(f"eval.csv: {dropped} evaluation(s) after the checkpoint ({start} env steps) "
                   f"will be redone", flush=True)  # fmt: skip
     # one monitor file per session, named by the env step it starts from (never overwritten)
-    in_curriculum = start < cfg.curriculum_steps
-    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, _monitor_file(run, start),
-                                 curriculum=in_curriculum)  # fmt: skip
+    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, _monitor_file(run, start))
     try:
-        return _train(cfg, run, venv, vecnorm, checkpoint, in_curriculum, extend)
+        return _train(cfg, run, venv, vecnorm, checkpoint, extend)
     finally:
-        vecnorm.venv.close()  # the curriculum may have replaced the first
+        vecnorm.venv.close()
 
 
-def _train(
-    cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, in_curriculum: bool, extend: bool
-) -> int:
+def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool) -> int:
     """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env.
 
     ``checkpoint``: the :class:`~training.plumbing.safe_files.Snapshot` a resume continues
@@ -850,7 +812,6 @@ def _train(
             callback=[
                 callback,
                 _critic_warmup(cfg, anchor),
-                _curriculum(cfg, run, vecnorm, TRAIN_SEED_OFFSET + cfg.seed, in_curriculum),
                 update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
                 *([_progress_bar(cfg)] if cfg.progress else []),
             ],

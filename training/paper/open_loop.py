@@ -19,7 +19,6 @@ Fig. 6), ``figures/modes.png`` (Fig. 7) and ``figures/walk.gif`` into a fresh ru
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ import biped_constraint_env  # noqa: F401  (registers the env)
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, sample_initial_q
 from training.plumbing.common import command, make_run_dir, parse_config, progress
 from training.plumbing.outputs import write_file
+from training.policy_io import json_text
 
 TABLES: dict[str, np.ndarray] = {
     "table2": np.array(
@@ -188,7 +188,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     summary = {k: v for k, v in out.items() if k not in ("frames", "images")}
     if cfg.noise_seeds:
         summary["noisy_starts"] = noisy_starts(cfg)
-    write_file(rd / "summary.json", json.dumps(summary, indent=2) + "\n")
+    write_file(rd / "summary.json", json_text(summary, indent=2))
     print(
         f"steps completed: {out['steps_completed']}   distance (hip): {out['distance_m']:.3f} m   "
         f"simulated: {out['t_end_s']:.3f} s"

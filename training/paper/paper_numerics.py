@@ -27,6 +27,7 @@ from biped_constraint_env.simulator import PAPER_OPTIONS, SimOptions, SimState, 
 from training.paper.open_loop import TABLES
 from training.plumbing.common import command, make_run_dir, parse_config
 from training.plumbing.outputs import save_figure, write_file
+from training.policy_io import json_text
 
 
 @dataclass
@@ -120,7 +121,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     fig.tight_layout()
     save_figure(fig, rd / "figures" / "paper_vs_reference.png", dpi=110)
     out = {k: {kk: vv for kk, vv in v.items() if kk != "trace"} for k, v in runs.items()}
-    write_file(rd / "summary.json", json.dumps(out, indent=1) + "\n")
+    write_file(rd / "summary.json", json_text(out))
     for label, r in out.items():
         print(f"{label}: {r['steps']} steps, ended by {r['end']}")
         print(f"   switches: {r['switches']}")

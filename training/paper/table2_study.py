@@ -54,6 +54,7 @@ from training.paper.open_loop import TABLES
 from training.plumbing.common import command, make_run_dir, parse_config
 from training.plumbing.distributed import TasksFailed, connect, run_tasks, shutdown
 from training.plumbing.outputs import save_figure, write_file
+from training.policy_io import json_text
 
 SIGNS = np.array(list(itertools.product((1, -1), repeat=5)), dtype=float)
 
@@ -195,7 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     w.writerow(["option_set", "sign_index", "posture_index", "steps", "root_y_m", "end_code"])
     w.writerows(rows)
     write_file(rd / "readings.csv.gz", gzip.compress(text.getvalue().encode(), mtime=0))
-    write_file(rd / "summary.json", json.dumps(summary, indent=1) + "\n")
+    write_file(rd / "summary.json", json_text(summary))
     buf = io.BytesIO()
     np.save(buf, postures)
     write_file(rd / "postures.npy", buf.getvalue())

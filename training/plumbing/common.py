@@ -96,6 +96,9 @@ def config_from_mapping(cls: type[C], data: dict[str, Any], source: str) -> C:
     """
     hints = get_type_hints(cls)
     unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
+    retired = sorted(unknown & set(getattr(cls, "RETIRED", {})))
+    if retired:
+        raise ValueError(f"{source}: {retired[0]}: {cls.RETIRED[retired[0]]}")
     if unknown:
         raise ValueError(f"{source}: unknown keys {sorted(unknown)}")
     cfg = cls(**{k: _coerce(hints[k], v, k) for k, v in data.items()})
