@@ -3,9 +3,9 @@
     python -m benchmarks.bench_ppo [--config training/configs/ppo_from_scratch.toml]
                                    [--steps 200000] [--rounds 2] [TRAIN_PPO FLAGS ...]
 
-Stable-Baselines3 PPO, built exactly as ``python -m training.train_ppo --config CONFIG`` builds
+Stable-Baselines3 PPO, built exactly as ``python -m training.ppo.train --config CONFIG`` builds
 it (the config's env options, network, rollout, minibatch, epochs; VecMonitor and
-VecNormalize; the batched env behind :class:`training.sb3_vec.BatchedSB3VecEnv`), learns for
+VecNormalize; the batched env behind :class:`training.ppo.sb3_vec.BatchedSB3VecEnv`), learns for
 ``--steps`` env steps after a warm-up update; its env-steps/s include rollouts and updates (a
 config with a teacher is timed in its PPO phase, from a fresh network: the imitation before it
 is not PPO). Any further flag is a ``train_ppo`` flag that overrides the config (e.g.
@@ -18,7 +18,7 @@ Rows:
   idle then), the setting for one training process on 2 cores;
 * PPO with the env on two numba threads next to torch on one (the oversubscription the
   one-thread default avoids);
-* two PPO processes side by side (two training seeds at once, as ``training.sweep`` or two
+* two PPO processes side by side (two training seeds at once, as ``training.ppo.sweep`` or two
   shells run them), each on one env and one torch thread: the sum of their rates;
 * the batched env alone on one thread, stepped with actions drawn as the config's initial
   policy draws them (Gaussian about 0 with its initial std, clipped).
@@ -43,7 +43,7 @@ DEFAULT_CONFIG = "training/configs/ppo_from_scratch.toml"
 def _config(path: str, overrides: Sequence[str] = ()):
     """The PPOConfig of a train_ppo config file with train_ppo flags on top."""
     from training.plumbing.common import parse_config
-    from training.ppo_config import PPOConfig
+    from training.ppo.config import PPOConfig
 
     return parse_config(PPOConfig, ["--config", path, *overrides], "bench")
 
@@ -58,8 +58,8 @@ def ppo_steps_per_s(
     """
     import torch
 
-    from training.train_ppo import make_model, training_env
-    from training.train_ppo import update_threads as threads_callback
+    from training.ppo.build import make_model, training_env
+    from training.ppo.callbacks import update_threads as threads_callback
 
     torch.set_num_threads(1)
     venv, vecnorm = training_env(cfg, seed, env_threads=env_threads)
@@ -104,7 +104,7 @@ def two_ppo_steps_per_s(config: str, steps: int, overrides: Sequence[str] = ()) 
 
 def env_steps_per_s(cfg, steps: int, env_threads: int) -> float:
     """Env steps per second of the same batched env alone, with the initial policy's law."""
-    from training.sb3_vec import make_sb3_vec_env
+    from training.ppo.sb3_vec import make_sb3_vec_env
 
     venv = make_sb3_vec_env(
         cfg.n_envs, 0, cfg.train_env_kwargs(), "batched", cfg.env_id, cfg.action_map(),

@@ -27,14 +27,19 @@ from .validation import check_seeds
 class ConstrainedBipedEnv(gym.Env):
     r"""Planar six-link biped whose ground contact is a constraint (Maeba et al. 2013).
 
+    To learn with an off-the-shelf RL library, start from ``task="track"``: the default task
+    keeps the strict contact checks, on which random or zero torques end every episode in its
+    first control period (``ep_len_mean`` 1); ``task="track"`` is the task plain SB3 PPO learns
+    from a random network (docs/sb3.md), and ``training/configs/`` holds the recipes.
+
     ## Description
     The robot of the paper "Bipedal Locomotion Model Based on Constraint Condition by
     Newton-Euler Method": a serial chain of six rods (stance foot, shank, thigh, thigh, shank,
     swing foot; 5 kg in all) in the vertical y-z plane, rooted at the stance toe. Its motion
     switches among the paper's four models (1: stance foot flat; 2: stance toe pivot; 3: toe
     + swing heel; 4: new stance foot flat + old toe), each with its own unknowns, solved by
-    the Newton-Euler method with the contacts as constraints (docs/conventions.md). One walking step
-    is the cycle 1 -> 2 -> 3 -> 4 -> 1; the legs swap roles at 3 -> 4. The agent applies the
+    the Newton-Euler method with the contacts as constraints (docs/conventions.md). One walking
+    step is the cycle 1 -> 2 -> 3 -> 4 -> 1; the legs swap roles at 3 -> 4. The agent applies the
     five joint torques and should walk forward (+y) as far as it can without leaving the four
     models. Conventions (angles, signs): docs/conventions.md.
 

@@ -7,9 +7,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-from training.rollouts import run_episodes_batched
-from training.sb3_vec import make_sb3_vec_env
-from training.stats import format_success, success
+from training.evaluation.rollouts import run_episodes_batched
+from training.evaluation.stats import format_success, success
+from training.ppo.sb3_vec import make_sb3_vec_env
 
 
 def train(total_timesteps=12_000_000, seed=0, dt=0.005, progress_bar=True):

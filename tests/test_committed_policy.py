@@ -26,9 +26,9 @@ class _Payload:
 def test_committed_walker_is_a_network_alone_and_deterministic():
     import torch
 
-    from training.imitation import FixedNormalizer
-    from training.policy_io import load_policy, policy_actor
-    from training.rollouts import run_episodes
+    from training.evaluation.rollouts import run_episodes
+    from training.ppo.imitation import FixedNormalizer
+    from training.ppo.policy_io import load_policy, policy_actor
 
     torch.set_num_threads(1)
     policy, norm, cfg, state = load_policy(POLICY, "final")
@@ -52,7 +52,7 @@ def test_committed_walker_is_a_network_alone_and_deterministic():
 
 def test_loading_a_policy_never_unpickles(monkeypatch, tmp_path):
     """A planted pickle payload in a policy directory is never run, and no loader unpickles."""
-    from training.policy_io import load_policy
+    from training.ppo.policy_io import load_policy
 
     run = tmp_path / "downloaded_policy"
     shutil.copytree(POLICY, run, ignore=shutil.ignore_patterns("figures"))
@@ -72,7 +72,7 @@ def test_loading_a_policy_never_unpickles(monkeypatch, tmp_path):
 
 
 def test_a_truncated_snapshot_is_not_taken_for_a_policy(tmp_path):
-    from training.policy_io import STATE_FILE, find_snapshot, load_policy
+    from training.ppo.policy_io import STATE_FILE, find_snapshot, load_policy
 
     run = tmp_path / "run"
     shutil.copytree(POLICY, run, ignore=shutil.ignore_patterns("figures"))
@@ -93,8 +93,8 @@ def test_committed_from_scratch_policy_learned_without_a_teacher_and_walks():
     network + PD about the reference at run time, walking from a held-out mid-stride start."""
     import torch
 
-    from training.policy_io import available, load_policy, policy_actor
-    from training.rollouts import run_episodes
+    from training.evaluation.rollouts import run_episodes
+    from training.ppo.policy_io import available, load_policy, policy_actor
 
     torch.set_num_threads(1)
     policy, norm, cfg, state = load_policy(SCRATCH, "final")
@@ -119,8 +119,8 @@ def test_committed_50hz_policies_walk_at_20_ms_with_what_they_say_in_the_loop(na
     clock but no reference in its input). One held-out 30 s episode per start walks."""
     import torch
 
-    from training.policy_io import available, load_policy, policy_actor
-    from training.rollouts import run_episodes
+    from training.evaluation.rollouts import run_episodes
+    from training.ppo.policy_io import available, load_policy, policy_actor
 
     torch.set_num_threads(1)
     path = POLICY.parent / name
@@ -143,8 +143,8 @@ def test_committed_level2_policy_walks_with_no_recorded_motion():
     import torch
 
     from biped_constraint_env.settings import make_settings
-    from training.policy_io import available, load_policy, policy_actor
-    from training.rollouts import run_episodes
+    from training.evaluation.rollouts import run_episodes
+    from training.ppo.policy_io import available, load_policy, policy_actor
 
     torch.set_num_threads(1)
     path = POLICY.parent / "ppo_gait_50hz"
@@ -167,8 +167,8 @@ def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
     starts. One held-out 30 s episode from the paper's rest posture and one mid-stride walk."""
     import torch
 
-    from training.policy_io import available, load_policy, policy_actor
-    from training.rollouts import run_episodes
+    from training.evaluation.rollouts import run_episodes
+    from training.ppo.policy_io import available, load_policy, policy_actor
 
     torch.set_num_threads(1)
     path = POLICY.parent / "ppo_alone_rest_50hz"

@@ -103,7 +103,7 @@ def test_study_command_stops_at_a_bad_address_before_any_work(tmp_path):
 
 @pytest.mark.slow
 def test_sweep_runs_two_trials_to_completion(tmp_path):
-    from training import sweep
+    from training.ppo import sweep
 
     tiny = [
         "total_timesteps=256",
@@ -135,7 +135,7 @@ def test_readme_sweep_command_runs_every_trial(tmp_path):
 
     root = Path(__file__).resolve().parents[1]
     readme = (root / "README.md").read_text()
-    command = "python -m training.sweep --config training/configs/ppo_walker.toml --seeds 0 1 2"
+    command = "python -m training.ppo.sweep --config training/configs/ppo_walker.toml --seeds 0 1 2"
     assert command in readme
     small = ["bc_episodes0=1", "bc_periods0=40", "bc_rounds=0", "bc_grad_steps=20"]
     small += ["total_timesteps=256", "n_envs=2", "n_steps=128", "batch_size=64", "n_epochs=1"]
@@ -160,7 +160,7 @@ def test_rllib_example_trains_one_iteration(capsys):
 
 
 def test_sweep_rejects_unknown_settings(tmp_path):
-    from training import sweep
+    from training.ppo import sweep
 
     base = ["--config", "training/configs/ppo_scratch.toml", "--out-dir", str(tmp_path)]
     for bad in (["--set", "no_such_field=1"], ["--grid", "seed=1,2"], ["--set", "gamma"]):

@@ -6,9 +6,9 @@ import pytest
 import torch
 
 import biped_constraint_env  # noqa: F401
-from training import imitation
 from training.controller.model_controller import ModelController
-from training.sb3_vec import ActionMap, make_sb3_vec_env
+from training.ppo import imitation
+from training.ppo.sb3_vec import ActionMap, make_sb3_vec_env
 
 GEAR = np.array([60.0, 150.0, 150.0, 80.0, 65.0])
 
@@ -102,7 +102,7 @@ def test_gear_same_in_the_batched_and_the_single_sb3_env():
 
 
 def test_train_ppo_with_teacher_smoke(tmp_path):
-    from training import train_ppo
+    from training.ppo import train as train_ppo
 
     rc = train_ppo.main(
         ["--out-dir", str(tmp_path), "--teacher", "model", "--gear", *map(str, GEAR)]
@@ -116,7 +116,7 @@ def test_train_ppo_with_teacher_smoke(tmp_path):
     (run,) = (tmp_path / "train_ppo").iterdir()
     assert (run / "imitation" / "policy.safetensors").is_file()
     assert (run / "imitation.csv").is_file()
-    from training.policy_io import load_policy, load_state
+    from training.ppo.policy_io import load_policy, load_state
 
     policy, _, cfg, state = load_policy(run, "final")
     assert isinstance(policy.features_extractor, imitation.FixedNormalizer)

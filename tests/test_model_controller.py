@@ -103,7 +103,7 @@ def test_unknown_gain_raises():
 
 def test_residual_is_projected_onto_the_constraints():
     """A residual moves the torques, but never so far that a contact pulls at the sample."""
-    from training.sb3_vec import action_map_from
+    from training.ppo.sb3_vec import action_map_from
 
     env = _env()
     ctl = ModelController(params=env.params, options=env.options)

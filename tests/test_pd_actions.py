@@ -143,7 +143,7 @@ def test_torque_actions_reproduce_the_recorded_trajectories():
 @pytest.mark.parametrize("kw", [{"action": "pd", "start": "rest"}, {"task": "track"}])
 def test_the_sb3_adapter_passes_pd_targets_through(kw):
     """An SB3 action of 0.5 is the env's PD action 0.5, not 75 clipped to 1."""
-    from training.sb3_vec import make_sb3_vec_env
+    from training.ppo.sb3_vec import make_sb3_vec_env
 
     venv = make_sb3_vec_env(2, 0, kw, "batched")
     venv.reset()

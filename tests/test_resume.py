@@ -1,6 +1,6 @@
 """Runs killed at any instant resume to their own saved total, in every phase.
 
-Each test starts ``python -m training.train_ppo`` as a separate process, kills it with SIGKILL
+Each test starts ``python -m training.ppo.train`` as a separate process, kills it with SIGKILL
 (no clean-up runs), and continues the run with ``--resume``.
 """
 
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from training import train_ppo
-from training.policy_io import STATE_FILE, find_snapshot, load_state, write_manifest
+from training.ppo import train as train_ppo
+from training.ppo.policy_io import STATE_FILE, find_snapshot, load_state, write_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--n-envs", "2", "--n-steps", "128", "--batch-size", "128", "--n-epochs", "1"]
@@ -33,7 +33,7 @@ on speed)."""
 
 
 def _start(out: Path, args: list[str]) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "training.train_ppo", "--out-dir", str(out), *args]
+    cmd = [sys.executable, "-m", "training.ppo.train", "--out-dir", str(out), *args]
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     return subprocess.Popen(
         cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE

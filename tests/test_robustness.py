@@ -1,6 +1,12 @@
 """The robustness protocol's conditions and its compact record."""
 
-from training.robustness import EPISODE_FIELDS, PUSH_IMPULSES_NS, compact, conditions, markdown
+from training.evaluation.robustness import (
+    EPISODE_FIELDS,
+    PUSH_IMPULSES_NS,
+    compact,
+    conditions,
+    markdown,
+)
 
 
 def test_conditions_cover_pushes_both_ways_noise_model_and_sensors():

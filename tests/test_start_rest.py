@@ -75,7 +75,7 @@ def test_a_batch_call_refuses_a_stateful_controller():
 
 
 def test_evaluate_takes_the_start(tmp_path):
-    from training import evaluate
+    from training.evaluation import evaluate
 
     rc = evaluate.main([str(POLICY), "--episodes", "1", "--start", "rest", "--out", str(tmp_path)])
     assert rc == 0

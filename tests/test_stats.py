@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from training.stats import format_success, success, wilson_interval
+from training.evaluation.stats import format_success, success, wilson_interval
 
 
 @pytest.mark.parametrize(

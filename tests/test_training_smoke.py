@@ -112,7 +112,8 @@ def test_paper_preset_baseline_is_deterministic_and_documented():
 
 
 def test_train_ppo_and_evaluate_smoke(tmp_path):
-    from training import evaluate, train_ppo
+    from training.evaluation import evaluate
+    from training.ppo import train as train_ppo
 
     rc = train_ppo.main(
         [
@@ -161,7 +162,7 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
     # a resume with a new total continues the step count from the checkpoint
     rc = train_ppo.main(["--resume", str(run), "--total-timesteps", "768", "--progress", "false"])
     assert rc == 0
-    from training.policy_io import load_state
+    from training.ppo.policy_io import load_state
 
     assert load_state(run / "final")["num_timesteps"] >= 768
     assert (run / "512.monitor.csv").is_file()  # the resumed session's own monitor
@@ -178,8 +179,9 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
 def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, monkeypatch):
     """The from-scratch recipe's pipeline: PD targets, tracking reward, reference starts in
     training only; evaluate and compare_runs rebuild the run-time env from the config."""
-    from training import compare_runs, train_ppo
-    from training.policy_io import load_policy, read_config
+    from training.evaluation import compare as compare_runs
+    from training.ppo import train as train_ppo
+    from training.ppo.policy_io import load_policy, read_config
 
     small = ["--total-timesteps", "512", "--n-envs", "4", "--n-steps", "64", "--batch-size",
              "128", "--n-epochs", "1", "--eval-freq", "256", "--eval-episodes", "1",
@@ -231,7 +233,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
 def test_retired_settings_are_refused_by_name(tmp_path, toml, match):
     """Options that never produced a walker are gone; a config naming one is refused in one
     line that says so (the package is unreleased: no aliases)."""
-    from training import train_ppo
+    from training.ppo import train as train_ppo
 
     cfg = tmp_path / "old.toml"
     cfg.write_text(toml)
@@ -241,9 +243,9 @@ def test_retired_settings_are_refused_by_name(tmp_path, toml, match):
 
 
 def test_train_ppo_help_explains_every_setting(capsys):
-    from training import train_ppo
     from training.plumbing.common import field_help
-    from training.ppo_config import PPOConfig
+    from training.ppo import train as train_ppo
+    from training.ppo.config import PPOConfig
 
     helps = field_help(PPOConfig)
     assert all(helps[f.name] for f in dataclasses.fields(PPOConfig)), helps
@@ -321,7 +323,7 @@ def test_optimised_midstride_table_documented_step_count():
 def test_sweep_without_ray_says_what_to_install(monkeypatch):
     import sys
 
-    from training import sweep
+    from training.ppo import sweep
 
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray raises ImportError
     with pytest.raises(SystemExit) as e:
@@ -373,7 +375,7 @@ def test_bench_ppo_takes_train_ppo_flags_on_top_of_the_config():
 
 def test_sweep_assignments_reach_the_env_tables():
     """``--grid env.dt=0.01,0.02``: an entry of a config's env table; plain keys stay fields."""
-    from training.sweep import parse_assignments
+    from training.ppo.sweep import parse_assignments
 
     grid = parse_assignments(["env.dt=0.01,0.02", "learning_rate=1e-4"], "--grid", grid=True)
     assert grid == {"env.dt": ["0.01", "0.02"], "learning_rate": ["1e-4"]}
@@ -386,7 +388,7 @@ def test_env_table_flags_go_on_top_of_the_config_table():
     """``--env KEY=VALUE``: TOML values over the config file's [env] entries, checked by the
     env's own settings check; the saved config holds the merged table."""
     from training.plumbing.common import parse_config, to_toml
-    from training.ppo_config import PPOConfig
+    from training.ppo.config import PPOConfig
 
     cfg = parse_config(PPOConfig, ["--config", "training/configs/ppo_from_scratch.toml",
                                    "--env", "dt=0.02", 'start="rest"'], "")  # fmt: skip

@@ -23,9 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from training import evaluate, train_ppo
+from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock
-from training.policy_io import write_manifest
+from training.ppo import train as train_ppo
+from training.ppo.policy_io import write_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRATCH = ROOT / "policies" / "ppo_from_scratch"
@@ -81,7 +82,7 @@ def test_env_id_module_is_not_imported_by_a_subprocess_either(policy, tmp_path):
     """As the issue ran it: ``python -m`` from the directory holding the payload."""
     (policy / "payload.py").write_text('open("PWNED", "w").write("ran")\n')
     _config(policy, env_id='"policies.evil.payload:ConstrainedBiped-v0"')
-    cmd = [sys.executable, "-m", "training.evaluate", "policies/evil", "--episodes", "1"]
+    cmd = [sys.executable, "-m", "training.evaluation.evaluate", "policies/evil", "--episodes", "1"]
     p = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert p.returncode != 0 and "env-id" in p.stderr and "Traceback" not in p.stderr
     assert not (tmp_path / "PWNED").exists() and not (tmp_path / "runs").exists()
@@ -265,7 +266,7 @@ def test_a_damaged_newest_snapshot_falls_back_to_the_previous(policy, tmp_path, 
     shutil.copytree(policy / "final", policy / "final.prev")
     w = _weights(policy)
     w.write_bytes(w.read_bytes()[:1000])  # truncated, its manifest now wrong
-    from training.policy_io import find_snapshot, load_policy
+    from training.ppo.policy_io import find_snapshot, load_policy
 
     assert find_snapshot(policy, "final") == policy / "final.prev"
     assert "damaged" in capsys.readouterr().err
@@ -347,7 +348,7 @@ def test_a_second_writer_is_refused_naming_the_holder(tmp_path):
 
 # ---------------------------------------------------------------- interrupted evaluations
 def _evaluate_proc(out: Path, cwd: Path) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "training.evaluate", str(SCRATCH), "--episodes", "3"]
+    cmd = [sys.executable, "-m", "training.evaluation.evaluate", str(SCRATCH), "--episodes", "3"]
     cmd += ["--out", str(out)]
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     return subprocess.Popen(
@@ -385,11 +386,11 @@ def test_an_interrupted_evaluation_leaves_the_old_output(tmp_path, sig):
 
 # ---------------------------------------------------------------- every command's --help
 COMMANDS = [
-    "training.train_ppo", "training.evaluate", "training.compare_runs",
+    "training.ppo.train", "training.evaluation.evaluate", "training.evaluation.compare",
     "training.paper.open_loop", "training.paper.optimize_open_loop",
     "training.paper.paper_numerics", "training.paper.table2_study",
     "training.controller.record_reference", "training.controller.tune",
-    "training.controller.model_controller", "training.policy_io", "training.sweep",
+    "training.controller.model_controller", "training.ppo.policy_io", "training.ppo.sweep",
     "benchmarks.accuracy", "benchmarks.bench_bounds", "benchmarks.bench_core",
     "benchmarks.bench_env", "benchmarks.bench_ppo", "benchmarks.failure_modes",
 ]  # fmt: skip
@@ -439,8 +440,8 @@ def test_an_imported_sb3_model_is_a_run_directory_that_evaluates(tmp_path, capsy
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from training.policy_io import main as policy_io_main
-    from training.sb3_vec import make_sb3_vec_env
+    from training.ppo.policy_io import main as policy_io_main
+    from training.ppo.sb3_vec import make_sb3_vec_env
 
     venv = VecNormalize(make_sb3_vec_env(2, 0, {"task": "track", "dt": 0.02}, "batched"))
     model = PPO("MlpPolicy", venv, n_steps=32, batch_size=32, n_epochs=1, device="cpu")
@@ -455,7 +456,7 @@ def test_an_imported_sb3_model_is_a_run_directory_that_evaluates(tmp_path, capsy
     assert policy_io_main([*argv, "--env", 'task="track"', "dt=0.02"]) == 0
     assert "unpickles" in capsys.readouterr().err  # the warning
     assert (out / "config.toml").is_file() and (out / "final" / "manifest.json").is_file()
-    from training.policy_io import read_config
+    from training.ppo.policy_io import read_config
 
     assert read_config(out).env == {"task": "track", "dt": 0.02}
     assert evaluate.main([str(out), "--episodes", "1", "--out", str(tmp_path / "ev")]) == 0

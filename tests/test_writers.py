@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from training import evaluate, train_ppo
+from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock, command_output, write_file
 from training.plumbing.safe_files import UntrustedFileError, read_npz
-from training.policy_io import (
+from training.ppo import train as train_ppo
+from training.ppo.policy_io import (
     NORMALIZER_FILE,
     OPTIMIZER_FILE,
     STATE_FILE,
@@ -255,7 +256,8 @@ def test_a_negative_return_statistic_is_refused(run, key, value):
 
 def test_imitation_counters_are_checked(tmp_path):
     """Finding 6: an imitation checkpoint's round is range-checked (round = -10^6 looped)."""
-    from training.ppo_config import PPOConfig
+    from training.ppo import warm_start
+    from training.ppo.config import PPOConfig
 
     cfg = PPOConfig(teacher="model", bc_rounds=3)
     where = tmp_path / "ckpt"
@@ -264,13 +266,13 @@ def test_imitation_counters_are_checked(tmp_path):
                                                 "rng": {}, "wall_s": 0}))  # fmt: skip
     write_manifest(where)
     with pytest.raises(UntrustedFileError, match="round must be an integer in"):
-        train_ppo._resume_imitation(cfg, where, None, np.random.default_rng(0))
+        warm_start.resume_imitation(cfg, where, None, np.random.default_rng(0))
 
 
 # ------------------------------------------------------------------ 10: kills and eval rows
 def _start(args: list[str]) -> subprocess.Popen:
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    return subprocess.Popen([sys.executable, "-m", "training.train_ppo", *args], cwd=ROOT,
+    return subprocess.Popen([sys.executable, "-m", "training.ppo.train", *args], cwd=ROOT,
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
 
 
@@ -472,9 +474,9 @@ def test_the_cli_and_the_config_share_the_control_period_bound():
 @pytest.mark.parametrize(
     "argv",
     [
-        ["training.compare_runs", str(SCRATCH), "--which", "nope"],
+        ["training.evaluation.compare", str(SCRATCH), "--which", "nope"],
         [
-            "training.policy_io",
+            "training.ppo.policy_io",
             "import-sb3",
             "missing.zip",
             "--vecnormalize",
@@ -483,8 +485,8 @@ def test_the_cli_and_the_config_share_the_control_period_bound():
             "o",
         ],
         ["benchmarks.bench_core", "--n", "0"],
-        ["training.evaluate", "no/such/run"],
-        ["training.train_ppo", "--resume", "no/such/run"],
+        ["training.evaluation.evaluate", "no/such/run"],
+        ["training.ppo.train", "--resume", "no/such/run"],
     ],
 )
 def test_refusals_are_one_line_with_status_2(tmp_path, argv):
@@ -517,7 +519,7 @@ def test_a_full_or_read_only_disk_is_one_line(tmp_path, how):
     subprocess.run(["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(disk)], check=True)
     try:
         p = subprocess.run(
-            [sys.executable, "-m", "training.compare_runs", str(SCRATCH), "--which", "final",
+            [sys.executable, "-m", "training.evaluation.compare", str(SCRATCH), "--which", "final",
              "--episodes", "1", "--out", str(disk / "rows.json"), "--curves",
              str(disk / "curves.png")],
             cwd=tmp_path, capture_output=True, text=True, timeout=300,
@@ -535,7 +537,7 @@ def test_a_load_during_a_replacement_never_mixes_two_snapshots(tmp_path):
     """Finding 9: a snapshot replaced while it loads gives the old files or the new ones."""
     import torch
 
-    from training.policy_io import build_policy, read_config, save_snapshot
+    from training.ppo.policy_io import build_policy, read_config, save_snapshot
 
     run = tmp_path / "run"
     shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best"))
@@ -617,7 +619,7 @@ def test_the_documented_observation_noise_bound_holds():
 
 
 def test_outputs_are_standard_json(tmp_path):
-    from training.policy_io import json_text
+    from training.ppo.policy_io import json_text
 
     text = json_text({"a": math.nan, "b": [-math.inf, 1.0], "c": np.float64(2.0)})
     assert json.loads(text, parse_constant=lambda c: pytest.fail(c)) == {
@@ -681,7 +683,7 @@ def test_expected_errnos_are_named():
 
 # ------------------------------------------------------------------ the published snapshot
 def test_a_run_publishes_its_selected_snapshot_and_evaluate_loads_it(trained_run, tmp_path):
-    from training.policy_io import published_snapshot
+    from training.ppo.policy_io import published_snapshot
 
     pub = json.loads((trained_run / "published.json").read_text())
     assert pub["snapshot"] == "best" and "selection" in pub["why"]
@@ -696,14 +698,14 @@ def test_a_run_publishes_its_selected_snapshot_and_evaluate_loads_it(trained_run
 def test_every_committed_policy_publishes_the_snapshot_its_figures_are_of(policy):
     """The README's rows are of the snapshot in each policy's evaluation.json; evaluate's
     default loads the same one."""
-    from training.policy_io import published_snapshot
+    from training.ppo.policy_io import published_snapshot
 
     d = ROOT / "policies" / policy
     assert published_snapshot(d)[0] == json.loads((d / "evaluation.json").read_text())["which"]
 
 
 def test_a_crafted_published_file_is_refused(tmp_path):
-    from training.policy_io import published_snapshot
+    from training.ppo.policy_io import published_snapshot
 
     run = tmp_path / "run"
     run.mkdir()
@@ -720,7 +722,9 @@ def _walking_evaluations(monkeypatch):
         return [{"steps_completed": 25, "distance_m": 20.0, "return": 1.0,
                  "end": "time_limit"} for _ in seeds]  # fmt: skip
 
-    monkeypatch.setattr(train_ppo, "run_episodes_batched", fake)
+    from training.ppo import callbacks
+
+    monkeypatch.setattr(callbacks, "run_episodes_batched", fake)
 
 
 def test_a_run_stops_once_its_criterion_has_held_and_says_so(tmp_path, monkeypatch, capsys):

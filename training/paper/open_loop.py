@@ -30,7 +30,7 @@ import biped_constraint_env  # noqa: F401  (registers the env)
 from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, sample_initial_q
 from training.plumbing.common import command, make_run_dir, parse_config, progress
 from training.plumbing.outputs import write_file
-from training.policy_io import json_text
+from training.ppo.policy_io import json_text
 
 TABLES: dict[str, np.ndarray] = {
     "table2": np.array(
@@ -164,7 +164,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the baseline and write its run directory."""
     cfg = parse_config(OpenLoopConfig, argv, __doc__.splitlines()[0])
     out = run(cfg)
-    rd = make_run_dir(cfg.out_dir, "open_loop", cfg.env_id, cfg.seed, cfg, argv).path
+    rd = make_run_dir(
+        cfg.out_dir, "open_loop", cfg.env_id, cfg.seed, cfg, argv, module="training.paper.open_loop"
+    ).path
     print(f"run directory: {rd}")
     from training.plumbing import plots
 

@@ -40,7 +40,7 @@ from biped_constraint_env.state import ST_MODE, ST_STEPS
 from training.plumbing.common import command, make_run_dir, parse_config, progress
 from training.plumbing.distributed import connect, cpu_count, init_ray, run_tasks, shutdown
 from training.plumbing.outputs import write_file
-from training.policy_io import json_text
+from training.ppo.policy_io import json_text
 
 
 @dataclass
@@ -214,7 +214,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     cfg = parse_config(OptimiseConfig, argv, __doc__.splitlines()[0])
     connect(cfg.ray, cfg.ray_address)
     rd = make_run_dir(
-        cfg.out_dir, "optimize_open_loop", "ConstrainedBiped-v0", cfg.seed, cfg, argv
+        cfg.out_dir,
+        "optimize_open_loop",
+        "ConstrainedBiped-v0",
+        cfg.seed,
+        cfg,
+        argv,
+        module="training.paper.optimize_open_loop",
     ).path
     _RUN[:] = [rd]
     print(f"run directory: {rd}")

@@ -27,7 +27,7 @@ from biped_constraint_env.simulator import PAPER_OPTIONS, SimOptions, SimState, 
 from training.paper.open_loop import TABLES
 from training.plumbing.common import command, make_run_dir, parse_config
 from training.plumbing.outputs import save_figure, write_file
-from training.policy_io import json_text
+from training.ppo.policy_io import json_text
 
 
 @dataclass
@@ -98,7 +98,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         ),
     }
     rd = make_run_dir(
-        cfg.out_dir, "paper_numerics", "ConstrainedBiped-v0", cfg.seed, cfg, argv
+        cfg.out_dir,
+        "paper_numerics",
+        "ConstrainedBiped-v0",
+        cfg.seed,
+        cfg,
+        argv,
+        module="training.paper.paper_numerics",
     ).path
     import matplotlib
 

@@ -54,7 +54,7 @@ from training.paper.open_loop import TABLES
 from training.plumbing.common import command, make_run_dir, parse_config
 from training.plumbing.distributed import TasksFailed, connect, run_tasks, shutdown
 from training.plumbing.outputs import save_figure, write_file
-from training.policy_io import json_text
+from training.ppo.policy_io import json_text
 
 SIGNS = np.array(list(itertools.product((1, -1), repeat=5)), dtype=float)
 
@@ -159,7 +159,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     connect(cfg.ray, cfg.ray_address)
     rng = np.random.default_rng(cfg.seed)
     postures = sample_postures(cfg.postures, rng)
-    rd = make_run_dir(cfg.out_dir, "table2_study", "ConstrainedBiped-v0", cfg.seed, cfg, argv).path
+    rd = make_run_dir(
+        cfg.out_dir,
+        "table2_study",
+        "ConstrainedBiped-v0",
+        cfg.seed,
+        cfg,
+        argv,
+        module="training.paper.table2_study",
+    ).path
     print(f"run directory: {rd}")
     tables = np.repeat(TABLES["table2"][None] * SIGNS[:, None, :], len(postures), axis=0)
     qs = np.tile(postures, (len(SIGNS), 1))

@@ -357,10 +357,17 @@ def _git(args: list[str], cwd: Path) -> str:
 
 
 def make_run_dir(
-    out_dir: Path, script: str, env_id: str, seed: int, cfg: Any, argv: Sequence[str] | None
+    out_dir: Path,
+    script: str,
+    env_id: str,
+    seed: int,
+    cfg: Any,
+    argv: Sequence[str] | None,
+    module: str = "",
 ):
     """Create a fresh run directory with config.toml, command.txt and versions.json.
 
+    ``module``: the command's module, for command.txt (default ``training.SCRIPT``).
     ``OUT_DIR/SCRIPT/ENV__seedS__STAMP`` is made with ``mkdir`` through its opened parent
     (a name that exists, a link included, takes the next suffix). Returns the run's
     :class:`~training.plumbing.outputs.OutDir` (its ``path`` is the directory's name).
@@ -381,7 +388,8 @@ def make_run_dir(
         run = parent.subdir(name, create=False)
     run.subdir("figures").close()
     run.write("config.toml", to_toml(cfg))
-    cmd = [sys.executable, "-m", f"training.{script}", *(sys.argv[1:] if argv is None else argv)]
+    cmd = [sys.executable, "-m", module or f"training.{script}",
+           *(sys.argv[1:] if argv is None else argv)]  # fmt: skip
     run.write("command.txt", " ".join(cmd) + "\n")
     run.write("versions.json", json.dumps(versions(), indent=2) + "\n")
     return run

@@ -7,7 +7,7 @@ A client of the environment, not a second training pipeline: RLlib builds the en
 env-runner process from its registered id, ``"biped_constraint_env:ConstrainedBiped-v0"``
 (Gymnasium imports the package, which registers the id, before ``gym.make``), with the default
 walking task and nothing else of this project. The project's own PPO (imitation, then SB3 PPO)
-is ``training.train_ppo``; this example shows that the env runs unchanged under RLlib's
+is ``training.ppo.train``; this example shows that the env runs unchanged under RLlib's
 sampling and learner processes, locally or on a cluster. It prints, per iteration, the env
 steps sampled, the mean episode return and length, and the wall time.
 """

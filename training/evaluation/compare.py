@@ -1,12 +1,13 @@
 """Evaluate several training runs on the same held-out seeds and print one table.
 
-    python -m training.compare_runs RUN [RUN ...] [--which best final] [--episodes 10]
+    python -m training.evaluation.compare RUN [RUN ...] [--which best final] [--episodes 10]
                                     [--scaffold CONFIG.toml] [--out runs/compare.json]
                                     [--curves runs/curves.png]
 
 For the training seeds and ablations of a study: each run's ``best`` (selected on the
 selection seeds during training) and/or ``final`` snapshot is evaluated, as ``python -m
-training.evaluate`` would (the run's own env options, the env's start distribution, default
+training.evaluation.evaluate`` would (the run's own env options, the env's start distribution,
+default
 strict physics), on evaluation seeds 0, 1, ... that no training or selection used. A row
 gives the run, what its config changes against the first run's, what is in the loop at run
 time, and the complete steps (mean ± std, min) with the episodes' ends. ``--scaffold`` adds
@@ -23,9 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
+from training.evaluation.rollouts import run_episodes, summarize
+from training.evaluation.stats import EPISODE_S
 from training.plumbing.common import CliParser, command, int_in, refusals
 from training.plumbing.outputs import write_file
-from training.policy_io import (
+from training.ppo.policy_io import (
     SNAPSHOTS,
     available,
     find_snapshot,
@@ -34,8 +37,6 @@ from training.policy_io import (
     load_state,
     policy_actor,
 )
-from training.rollouts import run_episodes, summarize
-from training.stats import EPISODE_S
 
 IGNORED = {"seed", "out_dir", "resume", "progress", "total_timesteps"}
 """Config fields that do not make a run a different recipe."""
@@ -63,7 +64,7 @@ def differences(cfg, base) -> str:
 
 
 def evaluate_run(run: Path, which: str, seeds: list[int], desc: str = "") -> dict:
-    """One run's snapshot on ``seeds``: the summary of :func:`training.rollouts.summarize`.
+    """One run's snapshot on ``seeds``: the summary of :func:`~.rollouts.summarize`.
 
     ``desc``: label of a progress bar over the episodes (none when empty).
     """
@@ -82,7 +83,7 @@ def evaluate_run(run: Path, which: str, seeds: list[int], desc: str = "") -> dic
 def scaffold_row(config: Path, seeds: list[int]) -> dict:
     """The run-time env of ``config`` with a zero network output, on ``seeds``."""
     from training.plumbing.common import parse_config
-    from training.ppo_config import PPOConfig
+    from training.ppo.config import PPOConfig
 
     cfg = parse_config(PPOConfig, ["--config", str(config)], "")
     amap = cfg.action_map()
@@ -121,7 +122,7 @@ def main(argv=None) -> int:
 
 def _compare(a: argparse.Namespace) -> int:
     """:func:`main` on parsed arguments."""
-    from training.policy_io import read_config
+    from training.ppo.policy_io import read_config
 
     seeds = list(range(a.seed, a.seed + a.episodes))
     rows = [scaffold_row(a.scaffold, seeds)] if a.scaffold is not None else []

@@ -549,7 +549,7 @@ class ObsNormalizer:
 def build_policy(cfg, observation_space=None):
     """A fresh SB3 ``ActorCriticPolicy`` (``MlpPolicy``) of the architecture in ``cfg``.
 
-    ``cfg``: a :class:`training.ppo_config.PPOConfig`. The action space is [-1, 1]^5 (the
+    ``cfg``: a :class:`training.ppo.config.PPOConfig`. The action space is [-1, 1]^5 (the
     policy's actions, mapped to torques by ``cfg.action_map()``).
     """
     from gymnasium import spaces
@@ -567,14 +567,14 @@ def build_policy(cfg, observation_space=None):
 
 
 def read_config(run: Path):
-    """The :class:`training.ppo_config.PPOConfig` of a run directory (its config.toml).
+    """The :class:`training.ppo.config.PPOConfig` of a run directory (its config.toml).
 
     The file is data from anywhere: read bounded, every key known, every value checked
     (:meth:`PPOConfig.check_untrusted`: the registered env id, the package's own controller
     and reference names, no path).
     """
     from training.plumbing.common import config_from_mapping
-    from training.ppo_config import PPOConfig
+    from training.ppo.config import PPOConfig
 
     run = Path(run)
     path = run / "config.toml"
@@ -660,7 +660,8 @@ def import_sb3_zip(
 
     ``out`` (an open output directory) receives ``config.toml`` (the network's architecture,
     read from the model, and ``env``: the keyword arguments of the env it was trained in,
-    ``[env]``) and the snapshot ``final/``, so that ``python -m training.evaluate OUT`` runs
+    ``[env]``) and the snapshot ``final/``, so that ``python -m training.evaluation.evaluate OUT``
+    runs
     it. The model's actions in [-1, 1] are taken as ``make_sb3_vec_env`` maps them (torques /
     150 N m; PD targets as they are). The model's observation size must be that env's. This
     loads the SB3 files, which unpickles them: it prints :data:`SB3_PICKLE_WARNING` first. Use
@@ -671,7 +672,7 @@ def import_sb3_zip(
     from stable_baselines3 import PPO
 
     from training.plumbing.common import to_toml
-    from training.ppo_config import ACTIVATIONS, PPOConfig, activation_fn
+    from training.ppo.config import ACTIVATIONS, PPOConfig, activation_fn
 
     print(SB3_PICKLE_WARNING.format(path=zip_path), file=sys.stderr, flush=True)
     model = PPO.load(zip_path, device="cpu")
@@ -694,7 +695,7 @@ def import_sb3_zip(
     if vecnormalize_pkl is not None:
         from stable_baselines3.common.vec_env import VecNormalize
 
-        from training.sb3_vec import make_sb3_vec_env
+        from training.ppo.sb3_vec import make_sb3_vec_env
 
         print(SB3_PICKLE_WARNING.format(path=vecnormalize_pkl), file=sys.stderr, flush=True)
         vecnorm = VecNormalize.load(str(vecnormalize_pkl), make_sb3_vec_env(1, 0, cfg.env, "dummy"))
@@ -710,7 +711,7 @@ def import_sb3_zip(
 
 @command("policy_io")
 def main(argv: list[str] | None = None) -> int:
-    """``python -m training.policy_io import-sb3 MODEL.zip [--vecnormalize PKL] --out DIR``."""
+    """``python -m training.ppo.policy_io import-sb3 MODEL.zip [--vecnormalize PKL] --out DIR``."""
     from training.plumbing.outputs import command_output
 
     ap = CliParser(description="Convert an SB3 model.zip to a pickle-free snapshot")

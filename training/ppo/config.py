@@ -1,7 +1,8 @@
 """The PPO training configuration and the seed ranges of training, selection and evaluation.
 
-Shared by :mod:`training.train_ppo` (which trains), :mod:`training.evaluate` (which rebuilds
-the policy and its env from a run's ``config.toml``) and :mod:`training.sweep`. The comment
+Shared by :mod:`training.ppo.train` (which trains), :mod:`training.evaluation.evaluate` (which
+rebuilds
+the policy and its env from a run's ``config.toml``) and :mod:`training.ppo.sweep`. The comment
 after each field is its ``--help`` text.
 """
 
@@ -200,7 +201,7 @@ class PPOConfig:
         Plain rescaling to torques, a residual on the base controller, or (``action="pd"``)
         the PD targets in [-1, 1] as they are.
         """
-        from training.sb3_vec import ActionMap, action_map_from
+        from training.ppo.sb3_vec import ActionMap, action_map_from
 
         if self.settings().action.pd:
             return ActionMap(1.0, None, 1.0)
@@ -231,7 +232,7 @@ class PPOConfig:
         """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.
 
         With a teacher the network normalises its observations itself
-        (:class:`training.imitation.FixedNormalizer`; the statistics are buffers, set by the
+        (:class:`training.ppo.imitation.FixedNormalizer`; the statistics are buffers, set by the
         imitation or by the loaded weights), so that the network alone maps the raw
         observation to its action.
         """
@@ -241,7 +242,7 @@ class PPOConfig:
             "activation_fn": activation_fn(self.activation),
         }
         if self.teacher:
-            from training.imitation import FixedNormalizer
+            from training.ppo.imitation import FixedNormalizer
 
             n = self.obs_dim()
             kw.update(
@@ -309,7 +310,7 @@ SELECTION_SEED_OFFSET = 10_000
 IMITATION_CHECK_SEED_OFFSET = 20_000
 """Seeds of the student episodes that report each imitation round's progress."""
 REPORT_SEED_OFFSET = 500_000
-"""The report seeds: ``training.evaluate``'s default episodes start here. No training
+"""The report seeds: ``training.evaluation.evaluate``'s default episodes start here. No training
 (``TRAIN_SEED_OFFSET``, ``DEMO_SEED_OFFSET``), selection (``SELECTION_SEED_OFFSET``), imitation
 check or development choice reads seeds in [500000, 600000)."""
 REPORT_EPISODES = 200

@@ -12,7 +12,7 @@ of the demonstrations (:class:`FixedNormalizer`).
 * :func:`fit` regresses the policy's mean action onto the labels (mean-squared error in units
   of the gear).
 
-:func:`training.train_ppo.imitation_warm_start` chains them (DART, DAgger rounds) before PPO.
+:func:`training.ppo.train.imitation_warm_start` chains them (DART, DAgger rounds) before PPO.
 """
 
 from __future__ import annotations

@@ -1,14 +1,15 @@
 r"""Multi-seed runs and hyperparameter sweeps of the PPO training, as Ray Tune trials.
 
-    python -m training.sweep --config training/configs/ppo_walker.toml --seeds 0 1 2
-    python -m training.sweep --config training/configs/ppo_scratch.toml --seeds 0 1 \\
+    python -m training.ppo.sweep --config training/configs/ppo_walker.toml --seeds 0 1 2
+    python -m training.ppo.sweep --config training/configs/ppo_scratch.toml --seeds 0 1 \\
         --grid learning_rate=1e-4,3e-4 --set total_timesteps=200000 [--ray-address HOST:PORT]
 
-Every trial is one run of ``training.train_ppo`` (the same code and config as a single run:
+Every trial is one run of ``training.ppo.train`` (the same code and config as a single run:
 ``--config``, then ``--set`` values, then the trial's grid values and seed), in its own Tune
 trial process with one CPU and one torch thread. When training ends, the final network is
 evaluated alone on ``--eval-episodes`` seeds from 10000 (the selection seeds: never used in
-training, and not the final evaluation's seeds 0, 1, ... of ``training.evaluate``); the trial
+training, and not the final evaluation's seeds 0, 1, ... of ``training.evaluation.evaluate``);
+the trial
 reports completed steps and distance, with the run directory (model, best/, checkpoints/) as
 its checkpoint. The trials run on a local Ray instance, or on a cluster with ``--ray-address``
 (every node needs the project installed, at the same path when the config names files). The
@@ -41,7 +42,7 @@ def parse_assignments(items: list[str], flag: str, grid: bool) -> dict[str, list
     """
     from dataclasses import fields
 
-    from training.ppo_config import PPOConfig
+    from training.ppo.config import PPOConfig
 
     known = {f.name for f in fields(PPOConfig)}
     out: dict[str, list[str] | str] = {}
@@ -65,9 +66,9 @@ def evaluate_run(run: Path, episodes: int) -> dict[str, float]:
 
     They start at 10000: the final evaluation's seeds (0, 1, ...) stay unseen by the ranking.
     """
-    from training.policy_io import load_policy, policy_actor
-    from training.ppo_config import SELECTION_SEED_OFFSET
-    from training.rollouts import run_episodes
+    from training.evaluation.rollouts import run_episodes
+    from training.ppo.config import SELECTION_SEED_OFFSET
+    from training.ppo.policy_io import load_policy, policy_actor
 
     policy, norm, cfg, _ = load_policy(run)
     actor = policy_actor(policy, norm, cfg)
@@ -89,7 +90,7 @@ def trial(config: dict) -> None:
     from ray import tune
 
     torch.set_num_threads(1)
-    from training import train_ppo
+    from training.ppo import train as train_ppo
 
     # Tune runs a trial in its own directory: relative paths (the config, files it names)
     # mean what they mean where the sweep was started, as in a serial run

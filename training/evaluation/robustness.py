@@ -1,6 +1,7 @@
 """The robustness protocol: success rates under pushes, reset noise, model error, sensor noise.
 
-``python -m training.evaluate RUN --robustness`` (or ``--controller model:NAME --robustness``)
+``python -m training.evaluation.evaluate RUN --robustness`` (or ``--controller model:NAME
+--robustness``)
 runs every condition of :func:`conditions` on the report seeds, in the batched env, from the
 evaluation's start, and writes ``robustness.json`` and ``figures/robustness.png``: success (at
 least 20 complete strict steps in 30 s) with its 95% interval against push size, and a panel of
@@ -47,7 +48,7 @@ def conditions(reset_noise: float) -> list[tuple[str, str, dict]]:
 
 def run(make_actor, env_kwargs: dict, seeds, env_id: str, label: str) -> list[dict]:
     """Every condition's row (``make_actor()``: a fresh batch actor per condition)."""
-    from training.rollouts import batched_row
+    from training.evaluation.rollouts import batched_row
 
     rows = []
     from biped_constraint_env.settings import make_settings
@@ -125,7 +126,7 @@ def figure(rows: list[dict], path: Path, title: str) -> None:
 
 def markdown(rows: list[dict]) -> str:
     """The rows as a markdown table: condition, success (95% CI), mean |hip dv|, ends."""
-    from training.stats import format_success
+    from training.evaluation.stats import format_success
 
     out = [
         "| condition | success, 95% CI | hip velocity change [m/s] | ends |",

@@ -1,6 +1,7 @@
 """Evaluate a trained policy (a run directory or the committed one) on seeded episodes.
 
-    python -m training.evaluate POLICY_DIR [--episodes 200] [--seed 500000] [--which final]
+    python -m training.evaluation.evaluate POLICY_DIR [--episodes 200] [--seed 500000]
+        [--which final]
         [--start midstride|rest] [--compare] [--out DIR]
 
 Runs N seeded episodes of the policy's env (its config; by default the walking task of
@@ -9,7 +10,7 @@ once in the batched env, and prints per row the success rate (at least 20 comple
 steps in the 30 s) with its 95% Wilson interval, completed steps (mean, std, min), distance,
 speed, cost of transport and the ends tallied. The default is 200 episodes on the report
 seeds 500000-500199, which no training, selection or development choice reads
-(:data:`training.ppo_config.REPORT_SEED_OFFSET`).
+(:data:`training.ppo.config.REPORT_SEED_OFFSET`).
 ``--start`` picks the start (default: the config's; a policy trained on both starts is
 evaluated mid-stride); from rest the gait-initiation figures are printed too. With
 ``--compare`` it runs, on the same seeds: the imitation result alone (the run's ``imitation``
@@ -22,7 +23,7 @@ strips of the best and the worst episode into ``runs/evaluate/NAME_WHICH_START``
 interrupted evaluation leaves the previous output or none.
 
 The policy is loaded from weights (safetensors) and plain data (TOML, JSON, npz): nothing in
-POLICY_DIR is unpickled (:mod:`training.policy_io`).
+POLICY_DIR is unpickled (:mod:`training.ppo.policy_io`).
 """
 
 from __future__ import annotations
@@ -35,10 +36,20 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.tasks import MAX_DT_S, MIN_DT_S
+from training.evaluation.rollouts import (
+    COMPARE_PUSH,
+    TABLE_HEADER,
+    batched_row,
+    run_episodes,
+    summarize,
+    table_row,
+)
+from training.evaluation.stats import EPISODE_S, MIN_STEPS, format_success
 from training.plumbing.common import CliParser, command, float_in, int_in
 from training.plumbing.outputs import command_output, write_file
 from training.plumbing.safe_files import UntrustedFileError
-from training.policy_io import (
+from training.ppo.config import REPORT_EPISODES, REPORT_SEED_OFFSET
+from training.ppo.policy_io import (
     SNAPSHOTS,
     available,
     json_text,
@@ -47,16 +58,6 @@ from training.policy_io import (
     policy_batch_actor,
     published_snapshot,
 )
-from training.ppo_config import REPORT_EPISODES, REPORT_SEED_OFFSET
-from training.rollouts import (
-    COMPARE_PUSH,
-    TABLE_HEADER,
-    batched_row,
-    run_episodes,
-    summarize,
-    table_row,
-)
-from training.stats import EPISODE_S, MIN_STEPS, format_success
 
 GIF_MAX_FRAMES = 500
 MIN_STEPS_FROM_REST = MIN_STEPS
@@ -134,8 +135,8 @@ STRIP_S = 2.0
 
 def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
     """Figure: the first ``STRIP_S`` from rest (stick figures, centre of mass and pressure)."""
+    from training.evaluation.rollouts import com_and_cop
     from training.plumbing import plots
-    from training.rollouts import com_and_cop
 
     frames = []
 
@@ -332,7 +333,7 @@ def _policy_loop(args) -> dict:
 def _controller_loop(args) -> dict:
     """What runs for ``--controller``: the model controller on the default walking task."""
     from training.controller.model_controller import controller_from
-    from training.ppo_config import PPOConfig
+    from training.ppo.config import PPOConfig
 
     controller_from(args.controller)  # refuses an unknown name here
     PPOConfig(teacher=args.controller).check_untrusted()  # shipped names only
@@ -343,7 +344,7 @@ def _controller_loop(args) -> dict:
 
 def _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir) -> list[dict]:
     """The ``--robustness`` rows, written with their figure into ``out_dir``."""
-    from training import robustness
+    from training.evaluation import robustness
 
     def make():  # a fresh batch actor per condition (controllers keep per-episode phases)
         return batch if loop["policy"] else controller_batch(args.controller, len(seeds))

@@ -1,6 +1,7 @@
 """Seeded episodes of a controller in the env, and their summary.
 
-Shared by :mod:`training.evaluate`, :mod:`training.train_ppo` (periodic evaluations) and the
+Shared by :mod:`training.evaluation.evaluate`, :mod:`training.ppo.train` (periodic evaluations)
+and the
 imitation pipeline; a controller is any callable obs (24,) -> torques (5,) [N m].
 :func:`run_episodes_batched` runs the same episodes all at once in the batched env (the
 periodic evaluations that select ``best/``).
@@ -16,7 +17,7 @@ import numpy as np
 
 from biped_constraint_env.model import N_LINKS
 from biped_constraint_env.observation import OBS_FORCES
-from training.stats import format_success, success
+from training.evaluation.stats import format_success, success
 
 JOINT_RATES = slice(N_LINKS + 1, 2 * N_LINKS)
 """The joint rates q-dot 1..5 in the observation (the cost of transport's work)."""
@@ -340,7 +341,7 @@ def batched_row(
     """
     import time
 
-    from training.stats import EPISODE_S, MIN_STEPS
+    from training.evaluation.stats import EPISODE_S, MIN_STEPS
 
     t0 = time.time()
     eps = run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S,

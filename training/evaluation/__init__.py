@@ -1,0 +1,1 @@
+"""Evaluation: report episodes, the evaluate and compare commands, robustness, statistics."""

@@ -1,0 +1,87 @@
+"""The PPO model and the training env of a config (what ``train`` and ``bench_ppo`` build)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from training.ppo.config import PPOConfig
+
+
+def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
+    """The PPO model of a config, with fresh weights.
+
+    ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
+    """
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.utils import LinearSchedule
+
+    policy_kwargs = cfg.policy_kwargs()
+    lr = cfg.learning_rate
+    if cfg.lr_schedule == "linear":
+        lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
+    if cfg.teacher and mean is not None:
+        policy_kwargs["features_extractor_kwargs"] = {"mean": list(mean), "var": list(var)}
+    return PPO(
+        "MlpPolicy",
+        vecnorm,
+        n_steps=cfg.n_steps,
+        batch_size=cfg.batch_size,
+        n_epochs=cfg.n_epochs,
+        learning_rate=lr,
+        target_kl=cfg.target_kl if cfg.target_kl > 0 else None,
+        use_sde=cfg.use_sde,
+        sde_sample_freq=cfg.sde_sample_freq,
+        gamma=cfg.gamma,
+        gae_lambda=cfg.gae_lambda,
+        clip_range=cfg.clip_range,
+        ent_coef=cfg.ent_coef,
+        policy_kwargs=policy_kwargs,
+        seed=cfg.seed,
+        device="cpu",
+        tensorboard_log=str(run / "tb"),
+        verbose=0,
+    )
+
+
+def training_env(
+    cfg: PPOConfig,
+    seed: int,
+    monitor_file: Path | None = None,
+    env_threads=None,
+):
+    """The training env of a config: (VecMonitor of the SB3 VecEnv, VecNormalize over it).
+
+    The config's training env options (with ``rsi``), its time limit and action map;
+    ``env_threads`` overrides
+    ``cfg.env_threads``. With a teacher the policy normalises its observations itself (fixed
+    statistics), so VecNormalize normalises only the returns.
+    """
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    venv = _monitored_env(cfg, seed, monitor_file, env_threads)
+    vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
+    return venv, vecnorm
+
+
+def _monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads):
+    """The config's SB3 VecEnv under a VecMonitor (:func:`training_env`'s inner env)."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from training.ppo.sb3_vec import make_sb3_vec_env
+
+    venv = make_sb3_vec_env(
+        cfg.n_envs,
+        seed,
+        cfg.train_env_kwargs(),
+        cfg.vec,
+        cfg.env_id,
+        cfg.action_map(),
+        num_threads=cfg.env_threads if env_threads is None else env_threads,
+        max_episode_steps=cfg.train_max_episode_steps(),
+    )
+    venv = VecMonitor(
+        venv,
+        None if monitor_file is None else str(monitor_file),
+        info_keywords=("steps_completed", "hip_y", "termination_reason"),
+    )
+    return venv

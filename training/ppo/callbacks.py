@@ -1,0 +1,292 @@
+"""The callbacks of a PPO run: selection evaluations, checkpoints, the stop rule, threads.
+
+Stable-Baselines3 ``BaseCallback`` classes built per run by :mod:`training.ppo.train`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from training.evaluation.rollouts import run_episodes_batched
+from training.plumbing.outputs import OutDir
+from training.plumbing.safe_files import read_csv
+from training.ppo.config import (
+    SELECTION_SEED_OFFSET,
+    PPOConfig,
+)
+from training.ppo.policy_io import (
+    UntrustedFileError,
+    policy_batch_actor,
+    save_snapshot,
+)
+
+PPO_CKPT = "checkpoints/latest"
+"""The resumable checkpoint of PPO (weights, optimiser, normaliser, counters)."""
+
+
+def critic_warmup(cfg: PPOConfig, anchor=None):
+    """A callback: the actor frozen for the first ``cfg.critic_warmup`` rollouts.
+
+    With ``anchor`` (an :class:`training.ppo.imitation.Anchor`) it also takes
+    ``cfg.bc_anchor_steps`` behaviour-cloning steps after every PPO update.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class CriticWarmup(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.rollouts = 0
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_training_start(self) -> None:
+            if self.model.num_timesteps > 0:  # resumed: the warm-up is over
+                self.rollouts = cfg.critic_warmup
+
+        def _on_rollout_start(self) -> None:  # after the previous rollout's update
+            if anchor is not None and self.rollouts > cfg.critic_warmup:
+                self.logger.record("train/bc_anchor_mse", anchor.steps(cfg.bc_anchor_steps))
+
+        def _on_rollout_end(self) -> None:
+            self.rollouts += 1
+            p = self.model.policy
+            frozen = self.rollouts <= cfg.critic_warmup
+            for param in [
+                *p.mlp_extractor.policy_net.parameters(),
+                *p.action_net.parameters(),
+                p.log_std,
+            ]:
+                param.requires_grad_(not frozen)
+
+    return CriticWarmup()
+
+
+def progress_bar(cfg: PPOConfig):
+    """A bar over the run's whole total: a resumed run starts where it stopped, ETA included."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    class RunProgress(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(
+                total=cfg.total_timesteps,
+                initial=self.model.num_timesteps,
+                desc="PPO",
+                unit=" env steps",
+                unit_scale=True,
+                mininterval=1.0,
+            )
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.model.num_timesteps - self.bar.n)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return RunProgress()
+
+
+def update_threads(rollout_threads: int, update_threads: int):
+    """A callback: torch on ``update_threads`` threads in PPO's updates, else ``rollout_threads``.
+
+    In an update the env is idle, so torch may use the cores the env used in the rollouts
+    without the two fighting (the batched env's numba threads are idle, not spinning).
+    """
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class UpdateThreads(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_start(self) -> None:  # after the previous update
+            torch.set_num_threads(rollout_threads)
+
+        def _on_rollout_end(self) -> None:  # the update follows
+            torch.set_num_threads(update_threads)
+
+    return UpdateThreads()
+
+
+def _vecnorm_normalizer(vecnorm):
+    """The :class:`~training.ppo.policy_io.ObsNormalizer` of a VecNormalize's current statistics."""
+    from training.ppo.policy_io import ObsNormalizer
+
+    rms = vecnorm.__dict__.get("obs_rms")
+    return ObsNormalizer({
+        "norm_obs": vecnorm.norm_obs, "obs_mean": getattr(rms, "mean", None),
+        "obs_var": getattr(rms, "var", None), "epsilon": vecnorm.epsilon,
+        "clip_obs": vecnorm.clip_obs,
+    })  # fmt: skip
+
+
+def _eval_row(eps: list[dict], n: int, wall_s: float) -> dict:
+    """One ``eval.csv`` row of a periodic evaluation's episodes."""
+    steps = np.array([e["steps_completed"] for e in eps])
+    return {
+        "env_steps": n,
+        "wall_s": round(wall_s, 1),
+        "steps_mean": steps.mean(),
+        "steps_min": steps.min(),
+        "distance_mean_m": float(np.mean([e["distance_m"] for e in eps])),
+        "return_mean": float(np.mean([e["return"] for e in eps])),
+        "reasons": json.dumps(dict(Counter(e["end"] for e in eps))),
+    }
+
+
+def selection_score(row: dict, select_by: str) -> float:
+    """The score of which ``best/`` keeps the highest.
+
+    The mean steps (distance breaks ties), or with ``select_by="min"`` the fewest steps of the
+    episodes first.
+    """
+    score = float(row["steps_mean"] + 1e-3 * row["distance_mean_m"])
+    return float(row["steps_min"] + 1e-3 * score) if select_by == "min" else score
+
+
+def _append_csv(run: OutDir, name: str, row: dict) -> None:
+    """Append one row to the run's CSV ``name`` (its header first when the file is new)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(row))
+    if run.kind(name) is None:
+        w.writeheader()
+    w.writerow(row)
+    run.append(name, buf.getvalue())
+
+
+def truncate_eval_csv(run: OutDir, n: int) -> int:
+    """Keep the ``eval.csv`` rows of evaluations at or before env step ``n`` (a resume's).
+
+    Evaluations after the checkpoint a resume continues from are redone by it; their rows
+    go, so that no row is duplicated. Returns the rows dropped.
+    """
+    if run.kind("eval.csv") is None:
+        return 0
+    rows = read_csv(run.path / "eval.csv", {"env_steps": int}, run.path)
+    text = run.read_text("eval.csv", 64 << 20)
+    lines = text.splitlines(keepends=True)
+    keep = [i for i, r in enumerate(rows) if 0 <= r["env_steps"] <= n]
+    if len(keep) == len(rows):
+        return 0
+    if keep != list(range(len(keep))):
+        raise UntrustedFileError(f"{run.path / 'eval.csv'}: rows out of env-step order")
+    run.write("eval.csv", "".join(lines[: 1 + len(keep)]))
+    return len(rows) - len(keep)
+
+
+def make_callbacks(
+    cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float = 0.0, streak: int = 0
+):
+    """The run's evaluation, checkpoint and stop callback.
+
+    ``best``: the best selection score so far; ``wall0``: the run's wall time before this
+    session [s]; ``streak``: the evaluations in a row that met the stop criterion.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class EvalAndCheckpoint(BaseCallback):
+        """Evaluate (steps, distance, termination reasons) and checkpoint periodically.
+
+        The evaluation runs the deterministic policy on ``cfg.eval_episodes`` selection
+        seeds at once in the batched env
+        (:func:`training.evaluation.rollouts.run_episodes_batched`).
+
+        ``best``: the best score so far (carried over by a resume), so that ``best/`` is
+        replaced only by a better evaluation.
+        """
+
+        def __init__(self):
+            super().__init__()
+            self.next_eval = cfg.eval_freq
+            self.next_ckpt = cfg.checkpoint_freq
+            self.best = best
+            self.streak = streak  # consecutive evaluations meeting the stop criterion
+            self.stopped = False
+            self.t0 = time.time() - wall0  # wall_s counts over every session of the run
+            self.snapshots = Path(run.where())  # paths through the run's held descriptor
+
+        def _on_training_start(self) -> None:
+            # on resume, count from the restored step count, not from zero
+            n = self.model.num_timesteps
+            if n == 0 and cfg.teacher:  # the imitation result competes for best/ too
+                self._evaluate(0)
+            self.next_eval = (n // cfg.eval_freq + 1) * cfg.eval_freq
+            self.next_ckpt = (n // cfg.checkpoint_freq + 1) * cfg.checkpoint_freq
+
+        def _on_step(self) -> bool:
+            n = self.model.num_timesteps
+            if n >= self.next_eval:
+                self.next_eval += cfg.eval_freq
+                self._evaluate(n)
+            if n >= self.next_ckpt:
+                self.next_ckpt += cfg.checkpoint_freq
+                self.checkpoint()
+            return not self.stopped
+
+        def checkpoint(self) -> None:
+            """Save the resumable state (weights, optimiser, normaliser, counters)."""
+            save_snapshot(
+                self.snapshots / PPO_CKPT,
+                self.model.policy,
+                {
+                    "phase": "ppo",
+                    "num_timesteps": self.model.num_timesteps,
+                    "best": self.best,
+                    "wall_s": time.time() - self.t0,
+                    "stop_streak": self.streak,
+                    "stopped": self.stopped,
+                },
+                vecnorm,
+                optimizer=True,
+            )
+
+        def _evaluate(self, n):
+            eps = run_episodes_batched(
+                policy_batch_actor(self.model.policy, _vecnorm_normalizer(vecnorm), cfg),
+                cfg.env_kwargs(),
+                range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + cfg.eval_episodes),
+                cfg.env_id,
+            )
+            row = _eval_row(eps, n, time.time() - self.t0)
+            _append_csv(run, "eval.csv", row)
+            for k in ("steps_mean", "distance_mean_m", "return_mean"):
+                self.logger.record(f"eval/{k}", row[k])
+            if cfg.stop_min_steps > 0:
+                met = row["steps_min"] >= cfg.stop_min_steps
+                self.streak = self.streak + 1 if met else 0
+                self.stopped = self.streak >= cfg.stop_evals
+            score = selection_score(row, cfg.select_by)
+            if score > self.best:
+                self.best = score
+                save_snapshot(
+                    self.snapshots / "best",
+                    self.model.policy,
+                    {"num_timesteps": n, "score": score, "steps_mean": float(row["steps_mean"])},
+                    vecnorm,
+                )
+            print(
+                f"[eval] {n} env steps: steps {row['steps_mean']:.2f} (min {row['steps_min']}), "
+                f"distance {row['distance_mean_m']:.2f} m, ends {row['reasons']} "
+                f"({time.time() - self.t0:.0f} s)",
+                flush=True,
+            )
+            if self.stopped:
+                print(f"[stop] {n} env steps: {stop_reason(cfg)}; the run stops here "
+                      f"({time.time() - self.t0:.0f} s)", flush=True)  # fmt: skip
+
+    return EvalAndCheckpoint()
+
+
+def stop_reason(cfg: PPOConfig) -> str:
+    """The stop criterion in words (it held)."""
+    return (f"every selection episode completed at least {cfg.stop_min_steps} steps in "
+            f"{cfg.stop_evals} consecutive evaluations")  # fmt: skip

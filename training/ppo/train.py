@@ -1,0 +1,285 @@
+"""Stable-Baselines3 PPO on ConstrainedBiped-v0, resumable from any interruption.
+
+    python -m training.ppo.train [--config training/configs/ppo_walker.toml] [--flag value ...]
+    python -m training.ppo.train --resume runs/train_ppo/<run>   # continue to its saved total
+    python -m training.ppo.train --help                          # every setting, explained
+
+Actions are rescaled to [-1, 1] for the policy; observations and rewards are normalised
+(VecNormalize; with a teacher the network normalises its observations itself). Several
+environments run in one batched compiled call (``--vec batched``, the default) or as SB3
+subprocess envs. Threads: torch and the batched env each use one thread by default
+(``--torch-threads``, ``--env-threads``): on a 2-core machine, two of each made PPO several
+times slower. One seed drives everything.
+
+The run directory holds config.toml, env_settings.json (the validated env settings),
+command.txt, versions.json, eval.csv, one
+``<start step>.monitor.csv`` per session, tb/ and figures/, and pickle-free snapshots
+(:mod:`training.ppo.policy_io`): ``imitation/`` (the warm start), ``best/`` (best periodic
+evaluation), ``final/`` and ``checkpoints/latest/`` (with the optimiser's state). Every
+snapshot is written atomically with the previous one kept; the imitation phase checkpoints
+each DAgger round (``checkpoints/imitation/``). ``--resume`` continues whatever was
+interrupted, imitation or PPO, to the run's own ``total_timesteps`` (give
+``--total-timesteps`` to extend it).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from training.plumbing.common import (
+    Refusal,
+    command,
+    given_flags,
+    make_run_dir,
+    parse_config,
+)
+from training.plumbing.outputs import OutDir, RunLock, check_tree
+from training.plumbing.safe_files import read_npz
+from training.ppo.build import make_model, training_env
+from training.ppo.callbacks import (
+    critic_warmup,
+    make_callbacks,
+    progress_bar,
+    stop_reason,
+    truncate_eval_csv,
+    update_threads,
+)
+from training.ppo.config import (
+    TRAIN_SEED_OFFSET,
+    PPOConfig,
+    bc_weights,
+)
+from training.ppo.policy_io import (
+    STATE_FILE,
+    UntrustedFileError,
+    available,
+    is_complete,
+    load_optimizer,
+    load_state,
+    load_weights,
+    open_snapshot,
+    restore_normalizer,
+    save_snapshot,
+)
+from training.ppo.runs import (
+    RESUME_OVERRIDES,
+    check_logs,
+    new_monitor_file,
+    publish,
+    resume_config,
+    write_settings,
+)
+from training.ppo.warm_start import IMITATION_CKPT, data_budget, data_spec, imitation_warm_start
+
+
+def _parse(argv: Sequence[str] | None) -> tuple[PPOConfig, set[str]]:
+    """The command line's config and the flags it gives (nothing read from a run yet)."""
+    cfg = parse_config(PPOConfig, argv, __doc__.splitlines()[0])
+    given = given_flags(PPOConfig, argv) - {"resume", "config", "out_dir"}  # out_dir: the run's
+    if cfg.resume:
+        ignored = sorted(given - set(RESUME_OVERRIDES))
+        if ignored:
+            raise Refusal(
+                f"train_ppo: error: --resume continues a run with its own settings; only "
+                f"{list(RESUME_OVERRIDES)} may be given, not {ignored}"
+            )
+    return cfg, given
+
+
+_RUN: list[Path] = []
+"""The run directory of the command in progress (for the interrupt message)."""
+
+
+def _interrupted() -> str:
+    if not _RUN:
+        return "nothing was written"
+    run = _RUN[-1]
+    if any(available(run, k) for k in ("checkpoint", "imitation")) or is_complete(
+        run / IMITATION_CKPT
+    ):
+        return f"{run} keeps its last snapshot; continue with: " \
+               f"python -m training.ppo.train --resume {run}"  # fmt: skip
+    return f"{run} holds no snapshot yet (only its settings); start a new run"
+
+
+@command("train_ppo", _interrupted)
+def main(argv: Sequence[str] | None = None) -> int:
+    """Train (or resume) and write the run directory (one writer at a time: a lock).
+
+    A resumed run is untrusted: its lock is taken before anything in it is read or written,
+    then its tree is checked (plain files and directories only), then its config is read.
+    """
+    flags, given = _parse(argv)
+    _RUN.clear()
+    if flags.resume:
+        if not os.path.lexists(flags.resume):
+            raise Refusal(f"train_ppo: error: --resume: {flags.resume}: no such directory")
+        handle = OutDir.open(Path(flags.resume), create=False)
+    else:
+        try:
+            handle = make_run_dir(flags.out_dir, "train_ppo", flags.env_id, flags.seed, flags,
+                                  argv, module="training.ppo.train")  # fmt: skip
+        except (OSError, UntrustedFileError) as e:
+            why = e.strerror if isinstance(e, OSError) else str(e)
+            raise Refusal(f"train_ppo: error: --out-dir {flags.out_dir}: cannot create the run "
+                          f"({why})") from None  # fmt: skip
+    with handle, RunLock(handle):
+        _RUN.append(handle.path)
+        check_tree(handle)
+        check_logs(handle)
+        if flags.resume:
+            cfg = resume_config(flags, given, handle)
+        else:
+            cfg = flags
+            write_settings(handle, cfg)
+        return _main(cfg, handle, extend="total_timesteps" in given)
+
+
+def _main(cfg: PPOConfig, run: OutDir, extend: bool = False) -> int:
+    """:func:`main` with the run's lock held."""
+    import torch
+    from stable_baselines3.common.utils import set_random_seed
+
+    torch.set_num_threads(cfg.torch_threads)
+    run.subdir("figures").close()
+    print(f"run directory: {run.path}", flush=True)
+    set_random_seed(cfg.seed)
+    resuming = available(run.path, "checkpoint")
+    checkpoint = open_snapshot(run.path, "checkpoint") if resuming else None
+    start = load_state(checkpoint)["num_timesteps"] if resuming else 0
+    if resuming:
+        dropped = truncate_eval_csv(run, start)
+        if dropped:
+            print(f"eval.csv: {dropped} evaluation(s) after the checkpoint ({start} env steps) "
+                  f"will be redone", flush=True)  # fmt: skip
+    # one monitor file per session, named by the env step it starts from (never overwritten)
+    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, new_monitor_file(run, start))
+    try:
+        return _train(cfg, run, venv, vecnorm, checkpoint, extend)
+    finally:
+        vecnorm.venv.close()
+
+
+def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool) -> int:
+    """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env.
+
+    ``checkpoint``: the :class:`~training.plumbing.safe_files.Snapshot` a resume continues
+    from (None: a new run); ``extend``: the resume gave a new total (a run that stopped by
+    its criterion trains on only then).
+    """
+    import torch
+
+    fs = Path(run.where())  # the run through its held descriptor: every snapshot written there
+    best = -np.inf
+    if available(run.path, "best"):
+        best = load_state(open_snapshot(run.path, "best")).get("score", -np.inf)
+    demos = None
+    resuming = checkpoint is not None
+    start, streak, stopped = 0, 0, False
+    if resuming:
+        n = cfg.obs_dim()
+        model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
+        load_weights(model.policy, checkpoint)
+        load_optimizer(model.policy, checkpoint)
+        restore_normalizer(vecnorm, checkpoint)
+        state = load_state(checkpoint)
+        model.num_timesteps = start = state["num_timesteps"]
+        best = max(best, state.get("best", -np.inf))
+        streak = state.get("stop_streak", 0)
+        if type(streak) is not int or not 0 <= streak <= 1000:
+            raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: stop_streak out of range")
+        if not isinstance(state.get("stopped", False), bool):
+            raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: stopped must be a boolean")
+        stopped = state.get("stopped", False) and not extend
+        print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
+    elif cfg.teacher and available(run.path, "imitation"):
+        n = cfg.obs_dim()
+        model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
+        load_weights(model.policy, open_snapshot(run.path, "imitation"))
+        print("starting PPO from the run's imitation result", flush=True)
+    elif cfg.teacher:
+        model, demos = imitation_warm_start(
+            cfg, fs, lambda mean, var: make_model(cfg, vecnorm, fs, mean, var)
+        )
+    else:
+        model = make_model(cfg, vecnorm, fs)
+    if model.num_timesteps == 0:
+        if len(cfg.log_std_joints) == 5:
+            model.policy.log_std.data[:] = torch.as_tensor(cfg.log_std_joints)
+        elif cfg.log_std_joints:
+            raise Refusal("train_ppo: error: --log-std-joints needs 5 values (one per joint) "
+                          "or none")  # fmt: skip
+        if cfg.action_std_nm > 0:
+            gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
+            model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
+        if cfg.teacher and not available(run.path, "imitation"):  # the imitation result alone
+            arrays = {"demos.npz": {"obs": demos.obs, "act": demos.act}}
+            save_snapshot(fs / "imitation", model.policy, {"num_timesteps": 0}, vecnorm,
+                          arrays=arrays)  # fmt: skip
+    anchor = None
+    if cfg.teacher and cfg.bc_anchor_steps > 0:
+        from training.ppo.imitation import Anchor, Dataset
+
+        snap = open_snapshot(run.path, "imitation")
+        if "demos.npz" not in snap:
+            raise UntrustedFileError(f"{snap.name('demos.npz')}: missing")
+        z = read_npz(snap.name("demos.npz"), data_spec(cfg), data=snap.files["demos.npz"],
+                     max_bytes=data_budget(cfg))  # fmt: skip
+        demos = Dataset(z["obs"].astype(np.float32), z["act"].astype(np.float32))
+        anchor = Anchor(
+            model.policy, demos, cfg.bc_anchor_lr, weights=bc_weights(cfg), seed=cfg.seed
+        )
+    remaining = max(cfg.total_timesteps - model.num_timesteps, 0)
+    if stopped:
+        print(f"the run stopped at {start} env steps: {stop_reason(cfg)}; give "
+              f"--total-timesteps to train on", flush=True)  # fmt: skip
+        remaining = 0
+    t0 = time.time()
+    wall0 = load_state(checkpoint).get("wall_s", 0.0) if resuming else 0.0
+    callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak)
+    callback.stopped = stopped
+    if remaining > 0:
+        print(f"PPO: {remaining} env steps to go", flush=True)
+        try:
+            model.learn(
+                total_timesteps=remaining,
+                callback=[
+                    callback,
+                    critic_warmup(cfg, anchor),
+                    update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
+                    *([progress_bar(cfg)] if cfg.progress else []),
+                ],
+                reset_num_timesteps=start == 0,
+            )
+        finally:  # TensorBoard's writer thread writes through the run's descriptor: close it
+            if getattr(model, "_logger", None) is not None:  # while the descriptor is open
+                model.logger.close()
+        callback.checkpoint()
+    wall = time.time() - t0
+    save_snapshot(fs / "final", model.policy, {"num_timesteps": model.num_timesteps}, vecnorm)
+    ended = (f"stopped: {stop_reason(cfg)}" if callback.stopped
+             else f"the budget of {cfg.total_timesteps} env steps ended")  # fmt: skip
+    publish(cfg, run, ended)
+    run.append(
+        "training_time.txt",
+        f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session; {ended}\n",
+    )
+    from training.plumbing.plots import learning_curve
+
+    with run.subdir("figures") as figs:
+        learning_curve(run.path, Path(figs.where()) / "learning_curve.png")
+    print(
+        f"done: {model.num_timesteps} env steps in {wall:.0f} s ({ended}); run directory: "
+        f"{run.path}",
+        flush=True,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
