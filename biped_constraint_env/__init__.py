@@ -37,8 +37,7 @@ if ENV_ID not in gymnasium.registry:
         id=ENV_ID,
         entry_point="biped_constraint_env.env:ConstrainedBipedEnv",
         vector_entry_point="biped_constraint_env.vector_env:ConstrainedBipedVectorEnv",
-        max_episode_steps=MAX_EPISODE_STEPS,
-    )
+    )  # episodes end by simulated time (the env's ``time_limit_s``), not by period count
 
 __all__ = [
     "BipedParams",

@@ -132,8 +132,10 @@ class ConstrainedBipedEnv(gym.Env):
     learning, as legged-robot RL ends episodes on a bad posture). A fall is one of
     these (a knee or the hip below the ground).
     ### Truncation
-    By the time limit only: ``max_episode_steps=6000`` control periods at registration (30 s
-    of the walking task; 120 s with ``task="paper"``'s 20 ms).
+    By simulated time: ``time_limit_s`` (default 30 s; None: none), the first period that
+    ends at or after it (the single and the batched env alike, at any control period, whether
+    its periods end early at model switches or not). Gymnasium's ``max_episode_steps`` (a
+    limit in control periods) still applies when given.
 
     ## Arguments
     Every argument is validated once, into ``env.settings`` (:mod:`.settings`: physics, task,
@@ -324,10 +326,12 @@ class ConstrainedBipedEnv(gym.Env):
         rewards, terminated = self.core.period(a[None, :], rngs)
         info = self.core.info(0)
         done = bool(terminated[0])
-        self._needs_reset = done
+        limit = self.settings.time_limit_s
+        truncated = not done and limit is not None and info["t"] >= limit - 1e-9
+        self._needs_reset = done or truncated
         if self.render_mode == "human":
             self.render()
-        return self.core.observation(rngs)[0], float(rewards[0]), done, False, info
+        return self.core.observation(rngs)[0], float(rewards[0]), done, truncated, info
 
     def render(self):
         """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""

@@ -38,7 +38,7 @@ from .perturbations import PerturbationSettings, perturbation_settings
 from .reference import OWN_REFERENCE, REFERENCES
 from .rewards import ENV_WEIGHT_KWARGS, RewardSettings, check_fall_height, reward_settings
 from .starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, check_start_settings
-from .tasks import TASKS, resolve_options, resolve_task
+from .tasks import EPISODE_S, MAX_EPISODE_S, TASKS, resolve_options, resolve_task
 from .validation import (
     check_array,
     check_bool,
@@ -153,6 +153,7 @@ class EnvSettings:
     reference: str
     fall_hip_height_m: float | None
     max_model_time_s: float | None = None
+    time_limit_s: float | None = EPISODE_S
 
     @property
     def dt(self) -> float:
@@ -186,7 +187,8 @@ class EnvSettings:
 
         out: dict[str, Any] = {"task": self.task, "reference": self.reference,
                                "fall_hip_height_m": self.fall_hip_height_m,
-                               "max_model_time_s": self.max_model_time_s}  # fmt: skip
+                               "max_model_time_s": self.max_model_time_s,
+                               "time_limit_s": self.time_limit_s}  # fmt: skip
         p = self.physics
         out["physics"] = {
             "params": "paper_biped" if p.params == paper_biped() else "custom",
@@ -305,6 +307,7 @@ def make_settings(
     reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
     fall_hip_height_m: float | None = None,
     max_model_time_s: float | None = None,
+    time_limit_s: float | None = EPISODE_S,
     posture=NOMINAL_POSTURE_RAD,
     start: str | None = None,
     phase_obs: bool | None = None,
@@ -355,6 +358,8 @@ def make_settings(
         reference=_reference(reference, start_kind),
         fall_hip_height_m=check_fall_height(fall_hip_height_m),
         max_model_time_s=_check_model_time(max_model_time_s),
+        time_limit_s=None if time_limit_s is None else check_real(
+            "time_limit_s", time_limit_s, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"),
     )
 
 

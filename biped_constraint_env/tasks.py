@@ -69,8 +69,14 @@ the stance-ankle offset, the contact clock observed); every one of these setting
 be given. ``task="paper"``: the paper's setting (its numerics, 20 ms, torques held through
 switches, start at rest in model 1)."""
 
+EPISODE_S = 30.0
+"""An episode's time limit by default [s] of simulated time (``time_limit_s``): at any control
+period, whether its periods end early at model switches or not."""
+MAX_EPISODE_S = 1e5
+"""Longest ``time_limit_s`` accepted [s]."""
 MAX_EPISODE_STEPS = 6000
-"""Time limit in control periods at registration (6000 x 5 ms = 30 s of the walking task)."""
+"""A limit in control periods that the training recipes keep for their selection episodes and
+training env (6000 periods: 28-30 s at the walking task's 5 ms, 120 s at 20 ms)."""
 
 
 MAX_DT_S = 1.0

@@ -24,7 +24,6 @@ from .core import EnvCore
 from .model import N_ACTUATED
 from .settings import make_settings
 from .starts import state_from_options
-from .tasks import MAX_EPISODE_STEPS
 from .validation import check_int, check_seeds
 
 MAX_NUM_ENVS = 1_000_000
@@ -36,8 +35,8 @@ class ConstrainedBipedVectorEnv(VectorEnv):
 
     Args:
         num_envs: number of sub-environments.
-        max_episode_steps: truncation after this many control periods (registration: 6000;
-            None: never).
+        max_episode_steps: truncation after this many control periods (None, the default:
+            none; the env's ``time_limit_s`` truncates by simulated time).
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` (Gymnasium's default) or ``SAME_STEP``
             (a finished sub-environment is reset within the same step; its last observation
             is in ``info["final_obs"]`` and its last info in ``info["final_info"]``, as
@@ -52,7 +51,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
     def __init__(
         self,
         num_envs: int = 1,
-        max_episode_steps: int | None = MAX_EPISODE_STEPS,
+        max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         num_threads: int = 1,
         **kwargs: Any,
@@ -139,10 +138,13 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         rewards, terminated = self.core.period(act, self._rngs, skip)
         self._elapsed += 1
         self._elapsed[resetting] = 0
+        infos = self.core.info()
         truncated = np.zeros(self.num_envs, bool)
         if self.max_episode_steps is not None:
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
-        infos = self.core.info()
+        limit = self.settings.time_limit_s
+        if limit is not None:
+            truncated |= (infos["t"] >= limit - 1e-9) & ~terminated
         done = np.flatnonzero(terminated | truncated)
         obs = self.core.observation(self._rngs)
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:

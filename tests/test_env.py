@@ -65,7 +65,8 @@ def test_sb3_check_env():
 
 def test_make_and_spaces():
     env = gym.make(ENV_ID, **V1)
-    assert env.spec.max_episode_steps == 6000
+    assert env.spec.max_episode_steps is None  # truncation by simulated time (time_limit_s)
+    assert env.unwrapped.settings.time_limit_s == 30.0
     assert env.action_space.shape == (5,) and env.action_space.high[0] == 150.0
     obs, info = env.reset(seed=0)
     assert obs.shape == (24,) and len(OBS_NAMES) == 24
@@ -288,7 +289,7 @@ def test_midstride_start():
     )
 
     env = gym.make("ConstrainedBiped-v0")
-    assert env.spec.max_episode_steps == 6000
+    assert env.spec.max_episode_steps is None and env.unwrapped.settings.time_limit_s == 30.0
     u = env.unwrapped
     assert u.dt == 0.005 and u.options.stop_at_switch and u.settings.start.start == "midstride"
     rates = []
@@ -381,3 +382,30 @@ def test_the_track_task_is_the_from_scratch_recipes_settings():
     walk = gym.make("ConstrainedBiped-v0").unwrapped
     assert walk.settings.reward.kind == "env" and not walk.settings.action.pd
     assert "reward=RewardSettings(kind='env'" in repr(walk)
+
+
+@pytest.mark.parametrize("dt", [0.005])
+def test_episodes_are_truncated_by_simulated_time_in_the_single_and_batched_env(dt):
+    """A walk truncated at 30 s of simulated time, not after 6000 (or 1500) periods that end
+    early at switches: the single env and every row of the batched env alike."""
+    from training.controller.model_controller import controller_from
+
+    kw = {"dt": dt, "time_limit_s": 3.0}
+    env = gym.make(ENV_ID, **kw)
+    ctl = controller_from("model:teacher_robust")
+    obs, _ = env.reset(seed=0)
+    ts = []
+    while True:
+        obs, _, term, trunc, info = env.step(ctl(obs))
+        ts.append(info["t"])
+        if term or trunc:
+            break
+    assert trunc and not term and 3.0 <= info["t"] < 3.0 + dt + 1e-9 and ts[-2] < 3.0
+    from training.evaluation.evaluate import controller_batch
+
+    venv = gym.make_vec(ENV_ID, 3, vectorization_mode="vector_entry_point", **kw)
+    ctl = controller_batch("model:teacher_robust", 3)
+    obs, _ = venv.reset(seed=0)
+    for _ in range(len(ts)):
+        obs, _, term, trunc, vinfo = venv.step(ctl(obs))
+    assert trunc[0] and vinfo["t"][0] == info["t"]

@@ -16,7 +16,8 @@ def test_one_id_with_string_entry_points():
     assert spec.kwargs == {}
     assert spec.entry_point == "biped_constraint_env.env:ConstrainedBipedEnv"
     assert spec.vector_entry_point == "biped_constraint_env.vector_env:ConstrainedBipedVectorEnv"
-    assert spec.max_episode_steps == biped_constraint_env.MAX_EPISODE_STEPS == 6000
+    assert spec.max_episode_steps is None  # episodes end by simulated time (time_limit_s, 30 s)
+    assert biped_constraint_env.MAX_EPISODE_STEPS == 6000  # the recipes' selection episodes
 
 
 def test_defaults_are_the_accurate_physics_and_the_walking_task():

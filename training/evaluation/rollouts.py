@@ -28,15 +28,17 @@ the episode (the env's ``perturbations`` option: through the constrained impulse
 
 
 def _time_limit(env_kwargs: dict, episode_s: float | None) -> dict:
-    """``max_episode_steps`` of ``episode_s`` [s] at the env's control period.
+    """The env's keyword arguments with the episodes' time limit.
 
-    None: the env's registered limit (6000 periods).
+    ``episode_s`` [s]: truncation by simulated time (the env's ``time_limit_s``); None: the
+    training recipes' selection episodes, :data:`~biped_constraint_env.tasks.MAX_EPISODE_STEPS`
+    control periods (28-30 s at 5 ms, 120 s at 20 ms).
     """
     if episode_s is None:
-        return {}
-    from biped_constraint_env.settings import make_settings
+        from biped_constraint_env.tasks import MAX_EPISODE_STEPS
 
-    return {"max_episode_steps": max(1, round(episode_s / make_settings(**env_kwargs).dt))}
+        return {**env_kwargs, "time_limit_s": None, "max_episode_steps": MAX_EPISODE_STEPS}
+    return {**env_kwargs, "time_limit_s": episode_s}
 
 
 def run_episodes(
@@ -59,7 +61,7 @@ def run_episodes(
     import biped_constraint_env  # noqa: F401
     from training.plumbing.common import progress
 
-    env = gym.make(env_id, **env_kwargs, **_time_limit(env_kwargs, episode_s),
+    env = gym.make(env_id, **_time_limit(env_kwargs, episode_s),
                    render_mode="rgb_array" if record else None)  # fmt: skip
     params = env.unwrapped.params
     weight = params.total_mass_kg * params.gravity_mps2
@@ -140,7 +142,6 @@ def run_episodes_batched(
         num_envs=len(seeds),
         vectorization_mode="vector_entry_point",
         num_threads=num_threads,
-        **env_kwargs,
         **_time_limit(env_kwargs, episode_s),
     )
     obs, info = venv.reset(seed=[int(s) for s in seeds])
@@ -192,7 +193,10 @@ def run_episodes_batched(
 
 def _period_bar(venv, desc: str | None):
     """A progress bar over the episodes' control periods (their time limit), or None."""
-    total = getattr(venv.unwrapped, "max_episode_steps", None)
+    u = venv.unwrapped
+    total = u.max_episode_steps
+    if total is None and u.settings.time_limit_s is not None:  # by time: about this many
+        total = math.ceil(u.settings.time_limit_s / u.settings.dt)
     if desc is None or not total:
         return None
     try:

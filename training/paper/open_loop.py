@@ -112,6 +112,7 @@ def run(
         reset_noise_scale=0.0,
         render_mode="rgb_array" if (record_frames and cfg.gif) else None,
         max_episode_steps=cfg.max_periods,
+        time_limit_s=None,  # the scene's own limit: max_periods
     )
     obs, info = env.reset(seed=cfg.seed, options={"q": q0, "qd": qd0, "mode": cfg.mode})
     u = env.unwrapped

@@ -77,8 +77,9 @@ def make_sb3_vec_env(
     that sets it, as ``task="track"``), the identity:
     the env's actions are PD targets in [-1, 1] already). ``num_threads``: numba threads of
     the batched env (1 next to a torch process on 2 cores; see the vector env).
-    ``max_episode_steps``: the episodes' time limit in control periods (None: the
-    registration's).
+    ``max_episode_steps``: the episodes' time limit in control periods (None: the recipes'
+    :data:`~biped_constraint_env.tasks.MAX_EPISODE_STEPS`); training episodes are limited by
+    periods, not by simulated time (unless ``env_kwargs`` sets ``time_limit_s``).
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
@@ -92,7 +93,10 @@ def make_sb3_vec_env(
             raise ValueError("PD-target actions take ActionMap(1.0, None, 1.0): no gear, no base")
         action_map = action_map or ActionMap(1.0, None, 1.0)
     action_map = action_map or ActionMap(limit, limit=limit)
-    limit_kw = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
+    from biped_constraint_env.tasks import MAX_EPISODE_STEPS
+
+    limit_kw = {"max_episode_steps": max_episode_steps or MAX_EPISODE_STEPS}
+    env_kwargs = {"time_limit_s": None, **env_kwargs}
     if vec == "batched":
         from gymnasium.vector import AutoresetMode
 
