@@ -15,11 +15,16 @@ def test_the_docs_show_the_example_as_it_is():
     assert code == EXAMPLE.read_text()
 
 
-def test_the_example_trains_and_evaluates():
+def test_the_example_trains_saves_logs_and_evaluates(tmp_path):
     spec = importlib.util.spec_from_file_location("train_sb3", EXAMPLE)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    model, env = mod.train(64, seed=0, progress_bar=False)  # one rollout of 64 x 64 env steps
+    log = Path(tmp_path) / "log"
+    model, env = mod.train(64, seed=0, progress_bar=False, log_dir=log)  # one rollout, 64 x 64
     assert model.num_timesteps >= 64 * 64
+    mod.save(model, env, tmp_path / "out")
+    assert (tmp_path / "out" / "model.zip").is_file()
+    assert (tmp_path / "out" / "vecnormalize.pkl").is_file()
+    assert (log / "monitor.csv").is_file() and any(log.glob("PPO_*/events.*"))
     s = mod.evaluate(model, env, episodes=2)
     assert s["episodes"] == 2 and 0.0 <= s["rate"] <= 1.0

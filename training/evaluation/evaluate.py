@@ -427,9 +427,9 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
             i = r["initiation"]
             print(
                 f"| {r['controller']} | {format_success(r['success'])} | "
-                f"{i['t_first_step_s_mean']:.2f}, "
-                f"{i['t_first_step_s_max']:.2f} | {i['first_step_m_mean']:.2f} | "
-                f"{i['steps_to_90pct_speed_mean']:.1f}, {i['steps_to_90pct_speed_max']} |"
+                f"{_num(i['t_first_step_s_mean'])}, {_num(i['t_first_step_s_max'])} | "
+                f"{_num(i['first_step_m_mean'])} | {_num(i['steps_to_90pct_speed_mean'], 1)}, "
+                f"{_num(i['steps_to_90pct_speed_max'], 0)} |"
             )
     names = ["best.gif", "best_strip.png", "worst_strip.png"]
     if args.compare or start == "rest":
@@ -440,6 +440,13 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
         f"\nfigures: {shown / 'figures'} ({', '.join(names)}); "
         f"summary: {shown / 'evaluation.json'}; {time.time() - t0:.0f} s"
     )
+
+
+def _num(x, digits: int = 2) -> str:
+    """A table cell: the number, or "-" where it is undefined (no episode took a step)."""
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "-"
+    return f"{x:.{digits}f}"
 
 
 if __name__ == "__main__":
