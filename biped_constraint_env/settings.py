@@ -372,9 +372,9 @@ def _check_model_time(max_model_time_s) -> float | None:
 
 RETIRED = {
     "restarts": "removed (starts at states the env visited itself never produced a walker; "
-    "docs/from_scratch.md)",
+    "docs/ablations.md)",
     "reference_obs": "removed (no committed policy saw the reference in its input; "
-    "docs/from_scratch.md)",
+    "docs/ablations.md)",
 }
 """Arguments the env no longer takes, each refused with why (the package is unreleased)."""
 

@@ -669,7 +669,7 @@ def test_messages_cite_pages_that_exist():
         bad += [f"{path.name}: README, {m}" for m in re.findall(r"README, ([A-Z][\w ]+)", text)]
         bad += [
             f"{path.name}: {m}"
-            for m in re.findall(r"docs/[\w.]+\.md", text)
+            for m in re.findall(r"docs/[\w./]+\.md", text)
             if not (ROOT / m).exists()
         ]
     assert bad == []

@@ -21,9 +21,9 @@ class PPOConfig:
 
     RETIRED: ClassVar[dict[str, str]] = {
         "curriculum_env": "removed with curriculum_steps (a curriculum of lenient checks never "
-        "produced a walker; docs/from_scratch.md)",
+        "produced a walker; docs/ablations.md)",
         "curriculum_steps": "removed with [curriculum_env] (a curriculum of lenient checks never "
-        "produced a walker; docs/from_scratch.md)",
+        "produced a walker; docs/ablations.md)",
     }
 
     env_id: str = "ConstrainedBiped-v0"  # Gymnasium id of the env

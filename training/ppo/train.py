@@ -1,7 +1,7 @@
 """Stable-Baselines3 PPO on ConstrainedBiped-v0, resumable from any interruption.
 
     python -m training.ppo.train [--config training/configs/ppo_walker.toml] [--flag value ...]
-    python -m training.ppo.train --resume runs/train_ppo/<run>   # continue to its saved total
+    python -m training.ppo.train --resume runs/train_ppo/RUN   # continue to its saved total
     python -m training.ppo.train --help                          # every setting, explained
 
 Actions are rescaled to [-1, 1] for the policy; observations and rewards are normalised
