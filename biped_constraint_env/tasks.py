@@ -40,7 +40,8 @@ TASK_DEFAULTS: dict[str, Any] = {
 
 TRACK_PD_OFFSET_RAD = (0.2, 0.0, 0.0, 0.0, 0.0)
 """``task="track"``'s stance-ankle offset [rad]: the smallest on a 0.05 rad grid with which a
-zero network output passes the mid-stride start's first period (docs/recipes/ppo_from_scratch.md)."""
+zero network output passes the mid-stride start's first period
+(docs/recipes/ppo_from_scratch.md)."""
 
 TASKS: dict[str, dict[str, Any]] = {
     "walk": {"preset": "default", "dt": 0.005, "stop_at_switch": True, "start": "midstride"},

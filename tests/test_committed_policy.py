@@ -162,7 +162,7 @@ def test_committed_level2_policy_walks_with_no_recorded_motion():
 
 
 def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
-    """policies/ppo_alone_rest_50hz (the network alone from rest): the network alone sets torques every 20 ms,
+    """policies/ppo_alone_rest_50hz (the network alone from rest): it sets torques every 20 ms,
     the clock but no reference in its input, trained by PPO from a random network from both
     starts. One held-out 30 s episode from the paper's rest posture and one mid-stride walk."""
     import torch
