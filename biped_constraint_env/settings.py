@@ -358,8 +358,11 @@ def make_settings(
         reference=_reference(reference, start_kind),
         fall_hip_height_m=check_fall_height(fall_hip_height_m),
         max_model_time_s=_check_model_time(max_model_time_s),
-        time_limit_s=None if time_limit_s is None else check_real(
-            "time_limit_s", time_limit_s, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"),
+        time_limit_s=None
+        if time_limit_s is None
+        else check_real(
+            "time_limit_s", time_limit_s, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"
+        ),
     )
 
 
