@@ -27,4 +27,6 @@ def test_the_example_trains_saves_logs_and_evaluates(tmp_path):
     assert (tmp_path / "out" / "vecnormalize.pkl").is_file()
     assert (log / "monitor.csv").is_file() and any(log.glob("PPO_*/events.*"))
     s = mod.evaluate(model, env, episodes=2)
+    env.close()  # the monitor file and the TensorBoard writer
+    model.logger.close()
     assert s["episodes"] == 2 and 0.0 <= s["rate"] <= 1.0
