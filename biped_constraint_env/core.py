@@ -25,7 +25,7 @@ from .period import EnvBuffers
 from .perturbations import Perturbations
 from .rewards import (
     REWARD_KINDS,
-    REWARD_TERMS,
+    REWARD_PARTS,
     TERMINATION_FALL,
     TERMINATION_MODEL_TIME,
     TERMINATION_NON_FINITE,
@@ -85,10 +85,9 @@ class EnvCore:
         if a.pd and not self._pd_follows:  # constant bases about a fixed pose: set once
             self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(np.ones(n, np.int64))
         self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
-        self._track = s.reward.kind == "tracking"
         self.gait = GaitReward(s.reward, p.dt, n) if s.reward.kind == "gait" else None
-        self._count_steps = self._track or self.gait is not None
-        self._max_model_t = s.max_model_time_s
+        self.reward = REWARD_PARTS[s.reward.kind]()
+        self.terminations = [] if s.max_model_time_s is None else [self._held_too_long]
         self._pd = a.pd
         self._pushes = s.perturbations.push_impulse_ns is not None
         self._noisy = s.perturbations.obs_noise is not None
@@ -141,15 +140,28 @@ class EnvCore:
         period, which refuses through :func:`~.actions.validate_actions`' ``ValueError``.
         Afterwards :meth:`info` gives the period's ``info``.
         """
-        buf, sim, a = self.buf, self.sim, self.settings.action
+        actions = self._before_period(actions, rngs, skip)
+        snap = self.reward.before(self)
+        self._run(actions, skip)
+        terminated = self._terminated(skip)
+        self._terms, rewards = self.reward.after(self, snap, terminated, skip)
+        self._set_reasons(terminated)
+        return rewards, terminated
+
+    def _before_period(self, actions: np.ndarray, rngs, skip) -> np.ndarray:
+        """The PD targets' bases (when they follow the clock), pushes and delayed actions."""
+        buf, sim = self.buf, self.sim
         if self._pd_follows:  # the targets' bases at the clocks and models (new starts too)
             buf.tgt[:], buf.rate[:] = self.tracking.bases(sim.ist[:, ST_MODE])
         if self.perturb.active:  # pushes due now (stepped rows); the delayed actions
             rows = range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
             actions = self.perturb.before_period(actions.astype(np.float64), rngs, rows)
         buf.act[:] = actions
-        steps0 = sim.ist[:, ST_STEPS].copy() if self._count_steps else None
-        hip_y0 = self.hip[:, 0].copy() if self.gait is not None else None
+        return actions
+
+    def _run(self, actions: np.ndarray, skip) -> None:
+        """The compiled period of every row but ``skip``, then the contact clock."""
+        buf, sim, a = self.buf, self.sim, self.settings.action
         if skip is not None:
             sim.status[skip] = NOT_STEPPED
         if buf.period():
@@ -166,39 +178,25 @@ class EnvCore:
             self.clock.advance(sim.ist[:, ST_MODE], sim.ist[:, ST_STEPS], stepped)
             if self.tracking is not None:
                 self.tracking.after_period(sim.ist[:, ST_STEPS])
+
+    def _terminated(self, skip) -> np.ndarray:
+        """The rows the period ended: an out-of-model event or a fall, then :attr:`terminations`."""
+        sim, buf = self.sim, self.buf
         if self.n == 1:  # the single env: scalar reads, a fifth of its step's Python time
             terminated = self._one
             terminated[0] = sim.status.item(0) > 0 or buf.fell.item(0) != 0
         else:
             terminated = (sim.status > 0) | (buf.fell != 0)
-        if self._max_model_t is not None:  # early termination: a contact phase held too long
-            held = self.clock.model_time_s() > self._max_model_t + 1e-9
-            if skip is not None:
-                held[skip] = False
-            terminated |= held
-        if self._track:
-            track = self.tracking.reward(sim.q, sim.qd, self.hip, sim.ist[:, ST_STEPS] - steps0,
-                                         ~terminated)  # fmt: skip
-            if skip is not None:
-                track[skip] = 0.0
-            self._terms, rewards = track[:, :-1], track[:, -1].copy()
-        elif self.gait is not None:
-            self._terms, rewards = self._gait_terms(hip_y0, sim.ist[:, ST_STEPS] - steps0,
-                                                    ~terminated, skip)  # fmt: skip
-        else:
-            self._terms, rewards = buf.rew[:, : len(REWARD_TERMS)], buf.rew[:, -1].copy()
-        self._set_reasons(terminated)
-        return rewards, terminated
+        for ends in self.terminations:
+            ends(terminated, skip)
+        return terminated
 
-    def _gait_terms(self, hip_y0, steps, alive, skip) -> tuple[np.ndarray, np.ndarray]:
-        """The gait reward's terms (n, 5) and rewards (n,) of the period (:mod:`.gait`)."""
-        sim, g = self.sim, self.gait
-        swing_vy = g.swing_ankle_vy(self.buf.chs, sim.q, sim.qd, sim.ist)
-        out = g.terms(self.hip[:, 0] - hip_y0, self.hip[:, 1], swing_vy, sim.ist[:, ST_MODE],
-                      self.clock.model_time_s(), steps, alive)  # fmt: skip
+    def _held_too_long(self, terminated: np.ndarray, skip) -> None:
+        """Early termination (``max_model_time_s``): a contact phase held too long."""
+        held = self.clock.model_time_s() > self.settings.max_model_time_s + 1e-9
         if skip is not None:
-            out[skip] = 0.0
-        return out[:, :-1], out[:, -1].copy()
+            held[skip] = False
+        terminated |= held
 
     def _set_reasons(self, terminated: np.ndarray) -> None:
         """The termination reason of every row (None where it goes on)."""

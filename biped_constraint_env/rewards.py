@@ -24,6 +24,7 @@ import numpy as np
 
 from .jit import njit_noalloc
 from .modes import N_MODELS
+from .state import ST_MODE, ST_STEPS
 from .validation import check_choice, check_mapping, check_real
 
 TERMINATION_NON_FINITE = "non_finite"
@@ -280,3 +281,58 @@ def check_fall_height(fall_hip_height_m) -> float | None:
     if fall_hip_height_m is None:
         return None
     return check_real("fall_hip_height_m", fall_hip_height_m, -10.0, 10.0, unit=" [m]")
+
+
+# ----------------------------------------------------------------------------- reward parts
+class EnvRewardPart:
+    """The env's own reward: the compiled period's terms (:func:`nb_reward_terms`)."""
+
+    def before(self, core):
+        """Nothing to remember before the period."""
+        return None
+
+    def after(self, core, snap, terminated, skip):
+        """(terms (n, k), rewards (n,)) of the period, as the compiled call wrote them."""
+        rew = core.buf.rew
+        return rew[:, : len(REWARD_TERMS)], rew[:, -1].copy()
+
+
+class TrackingRewardPart:
+    """``reward="tracking"``: kernels against the reference at the clock (``core.tracking``)."""
+
+    def before(self, core):
+        """The steps completed before the period."""
+        return core.sim.ist[:, ST_STEPS].copy()
+
+    def after(self, core, steps0, terminated, skip):
+        """(terms, rewards) of the period; rows in ``skip`` earn nothing."""
+        sim = core.sim
+        track = core.tracking.reward(sim.q, sim.qd, core.hip, sim.ist[:, ST_STEPS] - steps0,
+                                     ~terminated)  # fmt: skip
+        if skip is not None:
+            track[skip] = 0.0
+        return track[:, :-1], track[:, -1].copy()
+
+
+class GaitRewardPart:
+    """``reward="gait"``: the task's and the contact clock's terms (``core.gait``)."""
+
+    def before(self, core):
+        """The steps completed and the hip's y before the period."""
+        return core.sim.ist[:, ST_STEPS].copy(), core.hip[:, 0].copy()
+
+    def after(self, core, snap, terminated, skip):
+        """(terms, rewards) of the period; rows in ``skip`` earn nothing."""
+        steps0, hip_y0 = snap
+        sim, g = core.sim, core.gait
+        swing_vy = g.swing_ankle_vy(core.buf.chs, sim.q, sim.qd, sim.ist)
+        out = g.terms(core.hip[:, 0] - hip_y0, core.hip[:, 1], swing_vy,
+                      sim.ist[:, ST_MODE], core.clock.model_time_s(),
+                      sim.ist[:, ST_STEPS] - steps0, ~terminated)  # fmt: skip
+        if skip is not None:
+            out[skip] = 0.0
+        return out[:, :-1], out[:, -1].copy()
+
+
+REWARD_PARTS = {"env": EnvRewardPart, "tracking": TrackingRewardPart, "gait": GaitRewardPart}
+"""The part that computes each reward kind's terms after a period, by kind."""
