@@ -391,7 +391,8 @@ COMMANDS = [
     "training.paper.paper_numerics", "training.paper.table2_study",
     "training.controller.record_reference", "training.controller.tune",
     "training.controller.model_controller", "training.ppo.policy_io", "training.ppo.sweep",
-    "benchmarks.accuracy", "benchmarks.bench_bounds", "benchmarks.bench_core",
+    "benchmarks.accuracy", "benchmarks.bench_ab", "benchmarks.bench_bounds",
+    "benchmarks.bench_core",
     "benchmarks.bench_env", "benchmarks.bench_ppo", "benchmarks.failure_modes",
 ]  # fmt: skip
 
