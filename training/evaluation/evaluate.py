@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_constraint_env.tasks import MAX_DT_S, MIN_DT_S
+from biped_constraint_env.tasks import EPISODE_S, MAX_DT_S, MIN_DT_S
 from training.evaluation.rollouts import (
     COMPARE_PUSH,
     TABLE_HEADER,
@@ -44,7 +44,7 @@ from training.evaluation.rollouts import (
     summarize,
     table_row,
 )
-from training.evaluation.stats import EPISODE_S, MIN_STEPS, format_success
+from training.evaluation.stats import MIN_STEPS, format_success
 from training.plumbing.common import CliParser, command, float_in, int_in
 from training.plumbing.outputs import command_output, write_file
 from training.plumbing.safe_files import UntrustedFileError

@@ -345,7 +345,8 @@ def batched_row(
     """
     import time
 
-    from training.evaluation.stats import EPISODE_S, MIN_STEPS
+    from biped_constraint_env.tasks import EPISODE_S
+    from training.evaluation.stats import MIN_STEPS
 
     t0 = time.time()
     eps = run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S,

@@ -12,8 +12,6 @@ import math
 
 MIN_STEPS = 20
 """Complete steps in a 30 s episode that make it a success (walking, not a stumble)."""
-EPISODE_S = 30.0
-"""A report episode's length [s] at any control period (6000 periods of 5 ms; 1500 of 20 ms)."""
 Z95 = 1.959963984540054
 """The standard normal's 97.5% quantile (a two-sided 95% interval)."""
 

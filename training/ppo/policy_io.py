@@ -179,14 +179,28 @@ def published_snapshot(run: Path) -> tuple[str, str]:
 
 
 def open_snapshot(run: Path, which: str) -> Snapshot:
-    """Snapshot ``which`` of a run, its files read once and checked (:func:`read_snapshot`)."""
-    for _ in range(3):  # replaced between the check and the read: look again
-        where = find_snapshot(run, which)
+    """Snapshot ``which`` of a run, its files read once and checked (:func:`read_snapshot`).
+
+    The newest snapshot, else the kept previous one; with neither intact,
+    :func:`find_snapshot` names what the run has. Each file is read and hashed once.
+    """
+    if which not in SNAPSHOTS:
+        raise ValueError(f"which must be one of {sorted(SNAPSHOTS)}, got {which!r}")
+    where = Path(run) / SNAPSHOTS[which]
+    inside(Path(run), where.parent)  # no link on the way (checkpoints/ a link outside)
+    problem = None
+    for path in (where, where.with_name(where.name + PREVIOUS_SUFFIX)):
         try:
-            return read_snapshot(where)
-        except (FileNotFoundError, UntrustedFileError):
+            snap = read_snapshot(path)
+        except FileNotFoundError:
             continue
-    return read_snapshot(find_snapshot(run, which))
+        except UntrustedFileError as e:
+            problem = problem or str(e)
+            continue
+        if path != where and problem:
+            print(f"{where} is damaged ({problem}); using {path.name}", file=sys.stderr)
+        return snap
+    return read_snapshot(find_snapshot(run, which))  # refuses, naming what the run has
 
 
 def _snap(where: Path | Snapshot) -> Snapshot:
