@@ -10,7 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from biped_constraint_env.model import COL_COM, COL_DAMPING, COL_INERTIA, COL_MASS, ChainModel
+from biped_constraint_env.model import (
+    COL_COM,
+    COL_DAMPING,
+    COL_INERTIA,
+    COL_MASS,
+    SC_GRAVITY,
+    SC_GRAVITY_T,
+    ChainModel,
+)
 
 INTEGRATOR_TIMESTEP_S = 1e-4
 
@@ -18,6 +26,7 @@ INTEGRATOR_TIMESTEP_S = 1e-4
 def make_mjcf(chain: ChainModel, timestep: float = INTEGRATOR_TIMESTEP_S) -> str:
     """MJCF text of links 1..5 hanging from the fixed stance ankle."""
     ch = chain.packed
+    g, gt = chain.packed_scalars[SC_GRAVITY], chain.packed_scalars[SC_GRAVITY_T]
     lengths = [link.length_m for link in chain.links]
     # direction of each link at q = 0 along z: stance shank and thigh up, swing thigh and shank down
     up = {1: 1.0, 2: 1.0, 3: -1.0, 4: -1.0}
@@ -54,7 +63,7 @@ def make_mjcf(chain: ChainModel, timestep: float = INTEGRATOR_TIMESTEP_S) -> str
     motors = "".join(f'<motor joint="j{i}" gear="1" ctrllimited="false"/>' for i in range(1, 6))
     return (
         '<mujoco model="biped_model1">'
-        f'<option timestep="{timestep:.17g}" gravity="0 0 {-chain.gravity_mps2:.17g}" '
+        f'<option timestep="{timestep:.17g}" gravity="0 {-gt:.17g} {-g:.17g}" '
         'integrator="RK4">'
         '<flag contact="disable"/></option>'
         f"<worldbody>{body}</worldbody><actuator>{motors}</actuator></mujoco>"

@@ -17,6 +17,8 @@ from biped_constraint_env.model import (
     COL_INERTIA,
     COL_MASS,
     COL_NEXT,
+    SC_GRAVITY,
+    SC_GRAVITY_T,
     ChainModel,
 )
 
@@ -27,7 +29,8 @@ def build(chain: ChainModel):
 
     ch = chain.packed
     model = pin.Model()
-    model.gravity.linear = np.array([0.0, 0.0, -chain.gravity_mps2])
+    g, gt = chain.packed_scalars[SC_GRAVITY], chain.packed_scalars[SC_GRAVITY_T]
+    model.gravity.linear = np.array([0.0, -gt, -g])  # turned by the ground's slope
     parent = 0
     for i in range(6):
         rot = pin.utils.rotate("x", ch[i, COL_ANGLE])

@@ -124,7 +124,7 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
     """Advance one simulator by one control period dt [s], in place.
 
     Args:
-        chs, scs: (2, 6, 6), (2, 7) packed chains of both numberings.
+        chs, scs: (2, 6, 6), (2, 8) packed chains of both numberings.
         q, qd: (6,) state, updated in place. ist: int64 [mode, side, steps, ignored-mask];
         fst: float64 [t, root_y], both updated in place.
         tau_table: (4, 5) joint torques [N m] for models 1..4 (a row per model; the torque

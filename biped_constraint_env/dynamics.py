@@ -38,16 +38,18 @@ from .model import (
     COL_NEXT,
     N_LINKS,
     SC_GRAVITY,
+    SC_GRAVITY_T,
     ChainModel,
 )
 
 
 @njit_noalloc
-def nb_rnea_backward(ch, K, g, ext_link, ext_s, ext_fy, ext_fz, f, n):
+def nb_rnea_backward(ch, K, g, gt, ext_link, ext_s, ext_fy, ext_fz, f, n):
     """Backward Newton-Euler pass over the kinematic table K of :func:`nb_fk`.
 
-    Gravity enters as an upward base acceleration g, which shifts every joint-origin
-    acceleration by (0, g), so one forward pass at g = 0 serves kinematics and dynamics.
+    Gravity enters as a base acceleration opposite to it, which shifts every joint-origin
+    acceleration by (gt, g) (g normal to the ground, gt along it: (0, g) on flat ground), so
+    one forward pass at g = 0 serves kinematics and dynamics.
     An external force (ext_fy, ext_fz) [N] acts at offset ext_s [m] on link ext_link (< 0:
     none). Fills f (6, 2) (force on link i from link i-1 at joint i [N]; row 0: from the
     ground) and n (6,) (moment about joint i [N m] = the joint torque, damping excluded).
@@ -63,7 +65,7 @@ def nb_rnea_backward(ch, K, g, ext_link, ext_s, ext_fy, ext_fz, f, n):
         rcy = ch[i, COL_COM] * c
         rcz = ch[i, COL_COM] * s
         m = ch[i, COL_MASS]
-        acy = K[i, K_AY] - al * rcz - w * w * rcy
+        acy = K[i, K_AY] + gt - al * rcz - w * w * rcy
         acz = K[i, K_AZ] + g + al * rcy - w * w * rcz
         fy = m * acy + fny
         fz = m * acz + fnz
@@ -83,12 +85,12 @@ def nb_rnea_backward(ch, K, g, ext_link, ext_s, ext_fy, ext_fz, f, n):
 
 
 @njit(cache=True)
-def nb_rnea_full(ch, q, qd, qdd, g, ext_link, ext_s, ext_f):
+def nb_rnea_full(ch, q, qd, qdd, g, gt, ext_link, ext_s, ext_f):
     """Inverse dynamics with the joint wrenches (paper eq. 11, damping excluded).
 
     Args:
         ch: (6, 6) packed chain. q, qd, qdd: (6,) [rad, rad/s, rad/s^2].
-        g: gravity [m/s^2] (0 to leave it out).
+        g, gt: gravity normal to and along the ground [m/s^2] (0 to leave it out).
         ext_link, ext_s, ext_f: an external force ext_f (2,) [N] applied at offset ext_s [m] on
             link ext_link (ext_link < 0: none), e.g. a ground contact.
 
@@ -101,14 +103,14 @@ def nb_rnea_full(ch, q, qd, qdd, g, ext_link, ext_s, ext_f):
     nb_fk(ch, q, qd, qdd, 0.0, K)
     f = np.empty((N_LINKS, 2))
     n = np.empty(N_LINKS)
-    nb_rnea_backward(ch, K, g, ext_link, ext_s, ext_f[0], ext_f[1], f, n)
+    nb_rnea_backward(ch, K, g, gt, ext_link, ext_s, ext_f[0], ext_f[1], f, n)
     return n.copy(), f, n
 
 
 @njit(cache=True)
-def nb_rnea(ch, q, qd, qdd, g):
+def nb_rnea(ch, q, qd, qdd, g, gt):
     """Joint torques [N m] (6,) = M qdd + h + g(q) (no damping, no external force)."""
-    return nb_rnea_full(ch, q, qd, qdd, g, -1, 0.0, np.zeros(2))[0]
+    return nb_rnea_full(ch, q, qd, qdd, g, gt, -1, 0.0, np.zeros(2))[0]
 
 
 @njit(cache=True)
@@ -119,7 +121,7 @@ def nb_mass_matrix_rnea(ch, q):
     for i in range(N_LINKS):
         e = np.zeros(N_LINKS)
         e[i] = 1.0
-        M[:, i] = nb_rnea(ch, q, z, e, 0.0)
+        M[:, i] = nb_rnea(ch, q, z, e, 0.0, 0.0)
     return M
 
 
@@ -202,6 +204,7 @@ def rnea_full(
         ext_force_n: (2,) external force (y, z) [N].
     """
     g = chain.packed_scalars[SC_GRAVITY] if gravity else 0.0
+    gt = chain.packed_scalars[SC_GRAVITY_T] if gravity else 0.0
     ext = np.asarray(ext_force_n, dtype=np.float64)
     tau, f, n = nb_rnea_full(
         chain.packed,
@@ -209,6 +212,7 @@ def rnea_full(
         _vec6("qd", qd),
         _vec6("qdd", qdd),
         g,
+        gt,
         int(ext_link),
         float(ext_offset_m),
         ext,
@@ -237,8 +241,12 @@ def mass_matrix(chain: ChainModel, q) -> np.ndarray:
 
 
 @njit(cache=True)
-def nb_energy(ch, q, qd, g):
-    """(kinetic, potential) energy [J] of the chain with its root at height 0."""
+def nb_energy(ch, q, qd, g, gt):
+    """(kinetic, potential) energy [J] of the chain with its root at the origin.
+
+    ``g``, ``gt``: gravity normal to and along the ground [m/s^2] (the potential of a point
+    at (y, z) of the ground's frame is m (g z + gt y)).
+    """
     phi, w, al, o, vo, ao = nb_forward_pass(ch, q, qd, np.zeros(N_LINKS), 0.0, 0.0)
     kinetic = 0.0
     potential = 0.0
@@ -249,13 +257,22 @@ def nb_energy(ch, q, qd, g):
         vy = vo[i, 0] - w[i] * ch[i, COL_COM] * s
         vz = vo[i, 1] + w[i] * ch[i, COL_COM] * c
         kinetic += 0.5 * (m * (vy * vy + vz * vz) + ch[i, COL_INERTIA] * w[i] * w[i])
-        potential += m * g * (o[i, 1] + ch[i, COL_COM] * s)
+        potential += m * (g * (o[i, 1] + ch[i, COL_COM] * s) + gt * (o[i, 0] + ch[i, COL_COM] * c))
     return kinetic, potential
 
 
-def energy(chain: ChainModel, q, qd) -> tuple[float, float]:
-    """(kinetic, potential) energy [J]; potential measured from the ground (z = 0)."""
-    return nb_energy(chain.packed, _vec6("q", q), _vec6("qd", qd), chain.packed_scalars[SC_GRAVITY])
+def energy(chain: ChainModel, q, qd, root_y: float = 0.0) -> tuple[float, float]:
+    """(kinetic, potential) energy [J]; potential measured from the ground's origin.
+
+    On a slope the potential also depends on the root's place ``root_y`` [m] along the
+    ground (flat ground: it does not).
+    """
+    sc = chain.packed_scalars
+    kinetic, potential = nb_energy(
+        chain.packed, _vec6("q", q), _vec6("qd", qd), sc[SC_GRAVITY], sc[SC_GRAVITY_T]
+    )
+    mass = sum(link.mass_kg for link in chain.links)
+    return kinetic, potential + mass * sc[SC_GRAVITY_T] * float(root_y)
 
 
 def damping_matrix(chain: ChainModel) -> np.ndarray:

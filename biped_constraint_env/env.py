@@ -112,7 +112,9 @@ class ConstrainedBipedEnv(gym.Env):
     of straight down, the knee bent 0.05-0.6 rad, the thigh turning forward at 0-2 rad/s, the
     foot level), or half of the draws its model-1 counterpart on the flat stance foot (the leg
     leaning -0.3 to 0.3 rad, turning forward at 0.2-0.6 rad/s; ``STRIDE_*`` in :mod:`.starts`):
-    a training start spread over the step's swing with no recorded motion. All add
+    a training start spread over the step's swing with no recorded motion. A dict of weights
+    mixes them, one uniform draw first picking the component (``{"stride": 0.75,
+    "midstride": 0.25}``; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``). All add
     uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` (0.01 rad) to q1..q5; the
     stance toe is at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
     starts from any state in the coordinates of docs/conventions.md (validated: points on or
@@ -176,9 +178,11 @@ class ConstrainedBipedEnv(gym.Env):
     | | | | "pose": Fig. 2 q1..q5 [rad], "offset": zeros [rad], "gain_scale": 1.0 |
     | | | | (Kp x s, Kd x sqrt(s)), "dt": min(5 ms, dt), the PD law's physics step [s], |
     | | | | dividing dt; = dt holds the PD torque} (one kwarg: only PD reads them) |
-    | perturbations | None | | dict: pushes, model error, sensor noise, action delay |
-    |  |  |  | (:mod:`.perturbations`; one kwarg for the group: eight options that only |
-    |  |  |  | robustness studies set, validated together) |
+    | perturbations | None | | dict: pushes, model error, slopes, sensor noise, action |
+    |  |  |  | delay (:mod:`.perturbations`; one kwarg for the group: nine options that |
+    |  |  |  | robustness studies set, validated together; ``slope_rad``: the ground's |
+    |  |  |  | slope [rad], a constant or drawn per episode from (lo, hi), gravity turned |
+    |  |  |  | by it in the ground's frame, where every position and speed is measured) |
     | render_mode | None | | "rgb_array" or "human" |
 
     ## Learning
@@ -244,7 +248,12 @@ class ConstrainedBipedEnv(gym.Env):
       ``restarts``. Removed (no policy or result used them; each refused by name):
       ``restarts`` and ``reference_obs``. Changed: the control period is at least 2 ms, the
       integration steps at least 50 us, ``step_tol`` at least 1e-8 and PD updates at least
-      0.5 ms (bounds on the work of an episode); ``info["root_y"]`` added.
+      0.5 ms (bounds on the work of an episode); ``info["root_y"]`` added. Added: ``start``
+      as a weighted mixture of ``"rest"``, ``"midstride"`` and ``"stride"`` (a dict of
+      weights; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``, draw for draw); ground slopes:
+      ``BipedParams.slope_rad`` and ``perturbations["slope_rad"]`` (a constant or a range
+      drawn per episode), gravity turned by the slope in the ground's frame; the render draws
+      the slope.
 
     Example:
         >>> import gymnasium as gym
@@ -343,8 +352,9 @@ class ConstrainedBipedEnv(gym.Env):
         if self._renderer is None:
             self._renderer = Renderer()
         st = self.state
+        slope = self.core.perturb.params[0].slope_rad  # the episode's robot and ground
         frame = self._renderer.frame(
-            self.keypoints(), int(st.mode), st.t, st.stance_side, st.steps_completed
+            self.keypoints(), int(st.mode), st.t, st.stance_side, st.steps_completed, slope
         )
         if self.render_mode == "human":
             self._renderer.show(frame, 1.0 / self.metadata["render_fps"])

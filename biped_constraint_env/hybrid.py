@@ -45,6 +45,7 @@ from .model import (
     SC_FOOT0_MASS,
     SC_FRICTION,
     SC_GRAVITY,
+    SC_GRAVITY_T,
     SC_HEEL0,
     SC_HEEL5,
     SC_SPLIT,
@@ -238,7 +239,7 @@ def nb_mass_matrix_columns_w(ch, q, W):
             e[j] = 0.0
         e[i] = 1.0
         nb_fk(ch, q, z6, e, 0.0, K)
-        nb_rnea_backward(ch, K, 0.0, -1, 0.0, 0.0, 0.0, W[W_F], col)
+        nb_rnea_backward(ch, K, 0.0, 0.0, -1, 0.0, 0.0, 0.0, W[W_F], col)
         for j in range(6):
             M[j, i] = col[j]
 
@@ -282,7 +283,7 @@ def nb_solve_mode_w(
         nb_fk(ch, q, qd, z6, 0.0, K)
         nb_crba(ch, K, M, W[W_TMP])
     b = W[W_N]
-    nb_rnea_backward(ch, K, sc[SC_GRAVITY], -1, 0.0, 0.0, 0.0, W[W_F], b)
+    nb_rnea_backward(ch, K, sc[SC_GRAVITY], sc[SC_GRAVITY_T], -1, 0.0, 0.0, 0.0, W[W_F], b)
     for i in range(n):
         di = ch[s0 + i, COL_DAMPING]
         for j in range(n):
@@ -445,7 +446,7 @@ def nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd_h, W, forces, g):
         for j in range(6):
             slip += jac[0, j] * qd[j]
     nb_fk_accelerations(ch, W[W_QDD], K)  # K holds the solve's pass at (q, qd)
-    nb_rnea_backward(ch, K, sc[SC_GRAVITY], link, s_off, fy, fz, f, nmom)
+    nb_rnea_backward(ch, K, sc[SC_GRAVITY], sc[SC_GRAVITY_T], link, s_off, fy, fz, f, nmom)
     forces[FC_CONTACT] = fn
     forces[FC_STANCE_Y] = f[0, 0]
     forces[FC_SLIP] = slip

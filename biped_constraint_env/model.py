@@ -40,8 +40,11 @@ N_ACTUATED = 5
 COL_MASS, COL_INERTIA, COL_COM, COL_NEXT, COL_ANGLE, COL_DAMPING = range(6)
 N_COLS = 6
 # Layout of the packed scalar array (see ChainModel.packed_scalars).
-SC_GRAVITY, SC_FRICTION, SC_SPLIT, SC_HEEL0, SC_HEEL5, SC_TOE5, SC_FOOT0_MASS = range(7)
-N_SCALARS = 7
+(SC_GRAVITY, SC_FRICTION, SC_SPLIT, SC_HEEL0, SC_HEEL5, SC_TOE5, SC_FOOT0_MASS,
+ SC_GRAVITY_T) = range(8)  # fmt: skip
+N_SCALARS = 8
+MAX_SLOPE_RAD = 0.35
+"""Steepest accepted ground slope [rad] (about 20 degrees)."""
 
 
 def _check_finite(name: str, value: float, *, positive: bool = False, nonneg: bool = False) -> None:
@@ -105,6 +108,9 @@ class ChainModel:
         gravity_mps2: gravitational acceleration [m/s^2].
         friction_ratio: K, sliding friction over normal force [-].
         heel_toe_split_m: L of paper eq. 18-19 [m] (the stance foot's length by default).
+        slope_rad: the ground's slope [rad] (> 0: rising forward). The chain lives in the
+            ground's frame (y along the ground, z normal to it), where gravity is turned by
+            the slope: (-g sin(slope), -g cos(slope)).
     """
 
     links: tuple[LinkParams, ...]
@@ -112,6 +118,7 @@ class ChainModel:
     gravity_mps2: float
     friction_ratio: float
     heel_toe_split_m: float
+    slope_rad: float = 0.0
 
     @functools.cached_property
     def packed(self) -> np.ndarray:
@@ -142,17 +149,22 @@ class ChainModel:
 
     @functools.cached_property
     def packed_scalars(self) -> np.ndarray:
-        """(7,) read-only array: g, K, L split, stance-heel offset, swing heel/toe offsets, m0."""
+        """(8,) read-only array of the chain's scalars for the compiled core.
+
+        g normal to the ground, K, L split, stance-heel offset, swing heel/toe offsets, m0, g
+        along the ground (backward on an upward slope).
+        """
         foot0, foot5 = self.links[0], self.links[5]
         s = np.array(
             [
-                self.gravity_mps2,
+                self.gravity_mps2 * math.cos(self.slope_rad),
                 self.friction_ratio,
                 self.heel_toe_split_m,
                 -foot0.length_m,  # stance heel, measured from the toe (joint 0)
                 -0.5 * foot5.length_m,  # swing heel, measured from the ankle (joint 5)
                 0.5 * foot5.length_m,  # swing toe
                 foot0.mass_kg,
+                self.gravity_mps2 * math.sin(self.slope_rad),
             ]
         )
         s.flags.writeable = False
@@ -172,12 +184,16 @@ class BipedParams:
         gravity_mps2: g [m/s^2], > 0 (paper: 9.8).
         friction_ratio: K = f_t / f_n for sliding point contacts [-], >= 0 (not in the paper).
         heel_toe_split_m: L in paper eq. 18-19 [m]; ``None`` means the stance foot's length.
+        slope_rad: the ground's constant slope [rad], > 0 rising forward, |slope| <=
+            :data:`MAX_SLOPE_RAD` (paper: 0, flat). The contact stays the paper's plane z = 0
+            of the ground's frame; gravity turns by the slope in that frame.
     """
 
     links: tuple[LinkParams, ...] = PAPER_LINKS
     gravity_mps2: float = G_MPS2
     friction_ratio: float = DEFAULT_FRICTION_RATIO
     heel_toe_split_m: float | None = None
+    slope_rad: float = 0.0
     _chains: tuple[ChainModel, ChainModel] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -191,6 +207,12 @@ class BipedParams:
         _check_finite("friction_ratio", self.friction_ratio, nonneg=True)
         if self.heel_toe_split_m is not None:
             _check_finite("heel_toe_split_m", self.heel_toe_split_m, positive=True)
+        _check_finite("slope_rad", self.slope_rad)
+        if abs(self.slope_rad) > MAX_SLOPE_RAD:
+            raise ValueError(
+                f"slope_rad must be in [-{MAX_SLOPE_RAD}, {MAX_SLOPE_RAD}] [rad], "
+                f"got {self.slope_rad!r}"
+            )
         object.__setattr__(self, "_chains", (self._chain(0), self._chain(1)))
 
     def _chain(self, stance_side: int) -> ChainModel:
@@ -200,7 +222,9 @@ class BipedParams:
         # joint 6 - j; both feet's toe pivots use the paper's D_0.
         damping = tuple(d) if stance_side == 0 else (d[0], d[5], d[4], d[3], d[2], d[1])
         split = self.heel_toe_split_m if self.heel_toe_split_m is not None else links[0].length_m
-        return ChainModel(links, damping, self.gravity_mps2, self.friction_ratio, split)
+        return ChainModel(
+            links, damping, self.gravity_mps2, self.friction_ratio, split, float(self.slope_rad)
+        )
 
     def chain(self, stance_side: int) -> ChainModel:
         """The chain rooted at the toe of leg ``stance_side`` (0 = leg A, paper numbering)."""
@@ -210,7 +234,7 @@ class BipedParams:
 
     @functools.cached_property
     def packed(self) -> tuple[np.ndarray, np.ndarray]:
-        """((2, 6, 6), (2, 7)) read-only arrays of both numberings for the compiled core."""
+        """((2, 6, 6), (2, 8)) read-only arrays of both numberings for the compiled core."""
         chains = np.stack([c.packed for c in self._chains])
         scalars = np.stack([c.packed_scalars for c in self._chains])
         chains.flags.writeable = False

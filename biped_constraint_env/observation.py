@@ -105,7 +105,7 @@ def nb_observe_row(chs, scs, q, qd, ist, fst, forces, obs, hip, low, high, K):
 def nb_observe(CHS, SCS, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
     """Fill OBS (n, 24), clipped to [low, high], and HIP (n, 4: hip y, z, vy, vz).
 
-    CHS (n, 2, 6, 6), SCS (n, 2, 7): each row's packed robot.
+    CHS (n, 2, 6, 6), SCS (n, 2, 8): each row's packed robot.
     """
     K = np.empty((N_LINKS, NK))
     for i in range(Q.shape[0]):

@@ -186,7 +186,7 @@ def nb_env_period(
 ):  # fmt: skip
     """One control period of N environments (rows), serially; 0, or 1 if a torque is refused.
 
-    CHS (n, 2, 6, 6), SCS (n, 2, 7): each row's packed robot (:attr:`~.model.BipedParams.packed`;
+    CHS (n, 2, 6, 6), SCS (n, 2, 8): each row's packed robot (:attr:`~.model.BipedParams.packed`;
     rows differ under model randomisation).
 
     ACT (n, 5), the actions (torques [N m], held over the period in every model), is checked

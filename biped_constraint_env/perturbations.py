@@ -21,6 +21,9 @@ every option off (the default) nothing is drawn and the env is exactly the nomin
 * **Model error** (``mass_scale``, ``damping_scale``, ``friction_ratio``): per row and
   episode, each link's mass (with its inertia) and each joint's damping times U(lo, hi), and
   the friction ratio K ~ U(lo, hi), stepped in the compiled period (rows differ).
+* **Slopes** (``slope_rad``: a constant slope or a range (lo, hi) drawn per episode [rad],
+  > 0 rising forward): the ground's slope, gravity turned by it in the ground's frame
+  (:attr:`~.model.BipedParams.slope_rad`); drawn with the model, after it.
 * **Observation noise** (``obs_noise``): (angle std [rad], rate std [rad/s]) of Gaussian noise
   on the observed q and q-dot (the first 12 entries); the physics is unaffected.
 * **Action delay** (``action_delay=1``): each period applies the previous period's action
@@ -37,7 +40,7 @@ import numpy as np
 from .dynamics import nb_mass_matrix
 from .hybrid import nb_impulse
 from .kinematics import nb_point_jacobian
-from .model import N_ACTUATED, N_LINKS, SC_HEEL5, SC_TOE5, BipedParams
+from .model import MAX_SLOPE_RAD, N_ACTUATED, N_LINKS, SC_HEEL5, SC_TOE5, BipedParams
 from .state import FS_T, ST_MODE, ST_SIDE
 from .validation import check_int, check_real
 
@@ -75,6 +78,7 @@ class PerturbationSettings:
     friction_ratio: tuple[float, float] | None = None
     obs_noise: tuple[float, float] | None = None
     action_delay: int = 0
+    slope_rad: tuple[float, float] | None = None
 
     @property
     def active(self) -> bool:
@@ -85,7 +89,7 @@ class PerturbationSettings:
     def randomises_model(self) -> bool:
         """Whether rows draw their own robot at every start."""
         return any(r is not None for r in (self.mass_scale, self.damping_scale,
-                                           self.friction_ratio))  # fmt: skip
+                                           self.friction_ratio, self.slope_rad))  # fmt: skip
 
 
 def check_perturbation_settings(
@@ -97,6 +101,7 @@ def check_perturbation_settings(
     friction_ratio=None,
     obs_noise=None,
     action_delay=0,
+    slope_rad=None,
 ) -> PerturbationSettings:
     """The validated options; a push needs an impulse and either an interval or a time."""
     imp = _range("push_impulse_ns", push_impulse_ns, -PUSH_IMPULSE_MAX_NS, PUSH_IMPULSE_MAX_NS,
@@ -122,11 +127,12 @@ def check_perturbation_settings(
         friction_ratio=_range("friction_ratio", friction_ratio, 0.0, 10.0),
         obs_noise=noise,
         action_delay=check_int("action_delay", action_delay, 0, 1),
+        slope_rad=_range("slope_rad", slope_rad, -MAX_SLOPE_RAD, MAX_SLOPE_RAD, " [rad]"),
     )
 
 
 def draw_params(nominal: BipedParams, s: PerturbationSettings, rng) -> BipedParams:
-    """A robot drawn around ``nominal``: masses, damping (per link) and K, as ``s`` says."""
+    """A robot drawn around ``nominal``: masses, damping (per link), K and the slope."""
     links = list(nominal.links)
     if s.mass_scale is not None:
         f = rng.uniform(*s.mass_scale, N_LINKS)
@@ -138,7 +144,13 @@ def draw_params(nominal: BipedParams, s: PerturbationSettings, rng) -> BipedPara
         links = [dataclasses.replace(k, damping_nms_per_rad=k.damping_nms_per_rad * x)
                  for k, x in zip(links, f, strict=True)]  # fmt: skip
     k = nominal.friction_ratio if s.friction_ratio is None else rng.uniform(*s.friction_ratio)
-    return dataclasses.replace(nominal, links=tuple(links), friction_ratio=float(k))
+    slope = nominal.slope_rad
+    if s.slope_rad is not None:
+        lo, hi = s.slope_rad
+        slope = lo if lo == hi else rng.uniform(lo, hi)
+    return dataclasses.replace(
+        nominal, links=tuple(links), friction_ratio=float(k), slope_rad=float(slope)
+    )
 
 
 def hip_impulse(params: BipedParams, mode: int, side: int, q: np.ndarray, impulse) -> np.ndarray:

@@ -38,23 +38,36 @@ class Renderer:
         self._fig = None
 
     def frame(
-        self, pts: dict[str, np.ndarray], mode: int, t: float, stance_side: int, steps: int
+        self,
+        pts: dict[str, np.ndarray],
+        mode: int,
+        t: float,
+        stance_side: int,
+        steps: int,
+        slope_rad: float = 0.0,
     ) -> np.ndarray:
-        """RGB frame of the keypoints ``pts`` (world y, z [m]) with model number and time."""
+        """RGB frame of the keypoints ``pts`` (the ground's y, z [m]) with model and time.
+
+        On a slope the picture is turned by it (gravity points down the frame): the ground
+        rises to the right by ``slope_rad``.
+        """
         from PIL import Image, ImageDraw
 
         img = Image.new("RGB", (FRAME_WIDTH_PX, FRAME_HEIGHT_PX), (250, 250, 250))
         d = ImageDraw.Draw(img)
-        cy = pts["hip"][0]
+        c, s = np.cos(slope_rad), np.sin(slope_rad)
+        hip = pts["hip"]
         ground = FRAME_HEIGHT_PX - GROUND_MARGIN_PX
 
-        def px(p):
-            return (FRAME_WIDTH_PX / 2 + (p[0] - cy) * PIXELS_PER_M, ground - p[1] * PIXELS_PER_M)
+        def px(p):  # the ground's frame turned to the world's, centred on the hip's place
+            y, z = p[0] - hip[0], p[1]
+            return (FRAME_WIDTH_PX / 2 + (c * y - s * z) * PIXELS_PER_M,
+                    ground - (s * y + c * z) * PIXELS_PER_M)  # fmt: skip
 
-        d.line([(0, ground), (FRAME_WIDTH_PX, ground)], fill=(90, 90, 90), width=2)
-        for k in range(int(np.floor(cy - 4)), int(np.ceil(cy + 4)) + 1):  # 1 m ticks
-            x = px((k, 0.0))[0]
-            d.line([(x, ground), (x - 6, ground + 8)], fill=(150, 150, 150), width=1)
+        d.line([px((hip[0] - 8, 0.0)), px((hip[0] + 8, 0.0))], fill=(90, 90, 90), width=2)
+        for k in range(int(np.floor(hip[0] - 4)), int(np.ceil(hip[0] + 4)) + 1):  # 1 m ticks
+            x, y = px((k, 0.0))
+            d.line([(x, y), (x - 6, y + 8)], fill=(150, 150, 150), width=1)
         for leg, role in ((stance_side, "stance"), (1 - stance_side, "swing")):
             chain = [f"{role}_toe", f"{role}_heel", f"{role}_ankle", f"{role}_toe"]
             colour = _LEG_COLOURS[leg]

@@ -37,7 +37,12 @@ from .options import SimOptions
 from .perturbations import PerturbationSettings, perturbation_settings
 from .reference import OWN_REFERENCE, REFERENCES
 from .rewards import ENV_WEIGHT_KWARGS, RewardSettings, check_fall_height, reward_settings
-from .starts import NOMINAL_POSTURE_RAD, RESET_NOISE_SCALE_RAD, check_start_settings
+from .starts import (
+    NOMINAL_POSTURE_RAD,
+    RESET_NOISE_SCALE_RAD,
+    check_start_settings,
+    start_name,
+)
 from .tasks import EPISODE_S, MAX_EPISODE_S, TASKS, resolve_options, resolve_task
 from .validation import (
     check_array,
@@ -74,9 +79,12 @@ class PhysicsSettings:
 
 @dataclass(frozen=True)
 class StartSettings:
-    """The start distribution: kind, rest posture, reset noise and the rsi fraction."""
+    """The start distribution, rest posture, reset noise and the rsi fraction.
 
-    start: str
+    The distribution is a name, or a mixture ((component, weight), ...).
+    """
+
+    start: str | tuple[tuple[str, float], ...]
     posture: tuple[float, ...]
     reset_noise_scale: float
     rsi: float
@@ -199,6 +207,7 @@ class EnvSettings:
         for name in ("start", "action", "observation", "perturbations"):
             group = getattr(self, name)
             out[name] = {f.name: plain(getattr(group, f.name)) for f in dataclasses.fields(group)}
+        out["start"]["start"] = start_name(self.start.start)
         out["reward"] = self.reward.as_dict()
         return out
 
@@ -268,12 +277,14 @@ def _with_kind(spec: Any, task_kind: str) -> Any:
     return spec
 
 
-def _reference(reference: Any, start: str) -> str:
+def _reference(reference: Any, start: str | tuple) -> str:
     """The reference walk: a shipped name, "own" (each start its kind's) or an npz path.
 
     None: the start's own ("rest", "midstride"; "own" for mixed starts).
     """
     if reference is None:
+        if not isinstance(start, str):  # a mixture: "own" where it holds rest starts
+            return OWN_REFERENCE if "rest" in dict(start) else "midstride"
         return {"rest": "rest", "mixed": OWN_REFERENCE}.get(start, "midstride")
     known = (*REFERENCES, OWN_REFERENCE)
     if not isinstance(reference, str) or not (
@@ -309,7 +320,7 @@ def make_settings(
     max_model_time_s: float | None = None,
     time_limit_s: float | None = EPISODE_S,
     posture=NOMINAL_POSTURE_RAD,
-    start: str | None = None,
+    start: str | dict | None = None,
     phase_obs: bool | None = None,
     reward: str | dict | None = None,
     reference: str | None = None,

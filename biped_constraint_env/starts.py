@@ -34,8 +34,10 @@ STRIDE_FLAT_RATE_RANGE_RAD_S = (-0.6, -0.2)
 """Range of the stance leg's turning rate about the ankle at a stride start on the flat foot
 (model 1) [rad/s] (< 0: forward; the hip 0.6-1.8 m/s)."""
 STARTS = ("rest", "midstride", "mixed", "stride")
-"""Values of the env's ``start`` argument ("mixed": rest or mid-stride, 1/2 each; "stride": the
-mid-stride start with its swing leg drawn along its swing)."""
+"""Named values of the env's ``start`` argument ("mixed": rest or mid-stride, 1/2 each;
+"stride": the mid-stride start with its swing leg drawn along its swing)."""
+START_COMPONENTS = ("rest", "midstride", "stride")
+"""Components of a start mixture (``start={"stride": 0.75, "midstride": 0.25}``)."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 MAX_RESET_NOISE_RAD = 1.0
@@ -108,9 +110,13 @@ def flat_foot_stride_start(
 
 
 def sample_start(
-    rng: np.random.Generator, start: str, posture: np.ndarray, noise_scale: float
+    rng: np.random.Generator, start: str | tuple, posture: np.ndarray, noise_scale: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """(q, qd, mode) of a sampled episode start (``start`` in :data:`STARTS`).
+    """(q, qd, mode) of a sampled episode start (``start`` in :data:`STARTS`, or a mixture).
+
+    A mixture, ((component, weight), ...) with the weights summing to 1: one uniform draw
+    first picks the first component whose cumulative weight exceeds it ("mixed" is
+    (("rest", 0.5), ("midstride", 0.5))), then that component draws as below.
 
     "rest": ``posture`` at rest in model 1; "midstride": :func:`midstride_start` with the rate
     and theta0 drawn uniformly from :data:`MIDSTRIDE_RATE_RANGE_RAD_S` and
@@ -126,6 +132,8 @@ def sample_start(
     """
     if start == "mixed":
         start = "rest" if rng.random() < 0.5 else "midstride"
+    elif not isinstance(start, str):
+        start = _pick(start, rng.random())
     if start == "rest":
         return sample_initial_q(rng, posture, noise_scale), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
     flat = start == "stride" and rng.random() < 0.5
@@ -147,6 +155,16 @@ def sample_start(
         q, qd = midstride_start(rate, theta0)
     q[1:] += _uniform(rng, -noise_scale, noise_scale, N_LINKS - 1)
     return q, qd, int(Mode.FOOT_FLAT if flat else Mode.TOE_PIVOT)
+
+
+def _pick(mixture: tuple, u: float) -> str:
+    """The component of ``mixture`` ((name, weight), ...) that the uniform draw ``u`` picks."""
+    total = 0.0
+    for name, weight in mixture:
+        total += weight
+        if u < total:
+            return name
+    return next(name for name, weight in reversed(mixture) if weight > 0)  # round-off at 1
 
 
 def draw_starts(
@@ -272,13 +290,40 @@ def check_start_state(params: BipedParams, state: SimState) -> None:
             )
 
 
+def check_start_kind(start: Any) -> str | tuple[tuple[str, float], ...]:
+    """A named start (:data:`STARTS`), or a mixture {component: weight} as ((name, w), ...).
+
+    The weights (>= 0, finite, summing to > 0) are normalised to sum to 1, in the given order.
+    """
+    if isinstance(start, str):
+        return check_choice("start", start, STARTS)
+    if not isinstance(start, dict):
+        raise ValueError(
+            f"start must be one of {STARTS} or a mixture {{component: weight}} of "
+            f"{START_COMPONENTS}, got {start!r}"
+        )
+    check_mapping("start mixture", start, START_COMPONENTS)
+    if not start:
+        raise ValueError(f"a start mixture names at least one of {START_COMPONENTS}")
+    weights = {k: check_real(f"start weight of {k!r}", w, 0.0, 1e6) for k, w in start.items()}
+    total = sum(weights.values())
+    if total <= 0:
+        raise ValueError(f"a start mixture needs a positive weight, got {dict(start)!r}")
+    return tuple((k, w / total) for k, w in weights.items())
+
+
+def start_name(start: str | tuple) -> str | dict[str, float]:
+    """A start as the ``start`` argument gives it: its name, or the mixture as a dict."""
+    return start if isinstance(start, str) else dict(start)
+
+
 def check_start_settings(
-    params: BipedParams, start: str, posture, reset_noise_scale: float
-) -> tuple[str, np.ndarray, float]:
+    params: BipedParams, start: Any, posture, reset_noise_scale: float
+) -> tuple[str | tuple, np.ndarray, float]:
     """The validated start kind, rest posture (6,) [rad] and noise scale [rad] of an env."""
     if not isinstance(params, BipedParams):
         raise ValueError(f"params must be a BipedParams (e.g. paper_biped()), got {params!r}")
-    check_choice("start", start, STARTS)
+    start = check_start_kind(start)
     noise = check_real(
         "reset_noise_scale", reset_noise_scale, 0.0, MAX_RESET_NOISE_RAD, unit=" [rad]"
     )

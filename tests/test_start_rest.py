@@ -26,6 +26,35 @@ def test_mixed_start_draws_both_starts_the_same_in_both_envs():
     assert list(info["mode"]) == modes
 
 
+def test_start_mixture_draws_its_components_by_weight_the_same_in_both_envs():
+    from biped_constraint_env.starts import midstride_start
+
+    # "mixed" is the mixture {rest: 1/2, midstride: 1/2}: the same draws, start by start
+    a = gym.make("ConstrainedBiped-v0", start="mixed")
+    b = gym.make("ConstrainedBiped-v0", start={"rest": 1, "midstride": 1})
+    for s in range(10):
+        assert np.array_equal(a.reset(seed=s)[0], b.reset(seed=s)[0])
+    kw = {"start": {"stride": 0.75, "midstride": 0.25}, "reset_noise_scale": 0.0}
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    swing = midstride_start(-1.0, -0.2)[0][3]  # the mid-stride start's swing thigh
+    picks = []
+    for s in range(400):
+        env.reset(seed=s)
+        picks.append(env.unwrapped.state.q[3] == swing)  # the stride start draws the swing
+    assert 0.18 < np.mean(picks) < 0.32  # 1/4 of the starts mid-stride (400 draws)
+    venv = gym.make_vec(
+        "ConstrainedBiped-v0", num_envs=16, vectorization_mode="vector_entry_point", **kw
+    )
+    obs, _ = venv.reset(seed=3)
+    single = gym.make("ConstrainedBiped-v0", **kw)
+    assert np.array_equal(obs[5], single.reset(seed=3 + 5)[0])
+    assert env.unwrapped.settings.as_dict()["start"]["start"] == {"stride": 0.75, "midstride": 0.25}
+    for bad, words in (({"strid": 1}, "did you mean 'stride'"), ({"rest": 0}, "positive weight"),
+                       (5, "or a mixture")):  # fmt: skip
+        with pytest.raises(ValueError, match=words):
+            gym.make("ConstrainedBiped-v0", start=bad)
+
+
 def test_rest_start_is_the_fig2_posture_at_rest():
     env = gym.make("ConstrainedBiped-v0", start="rest")
     obs, info = env.reset(seed=0)

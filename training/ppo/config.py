@@ -187,7 +187,7 @@ class PPOConfig:
     def evaluation_start(self) -> str:
         """The start evaluations use: the env's, mid-stride for one trained on both."""
         start = self.settings().start.start
-        return "midstride" if start == "mixed" else start
+        return start if start in ("rest", "midstride", "stride") else "midstride"
 
     def train_max_episode_steps(self) -> int | None:
         """The training episodes' time limit in control periods (None: the env's)."""
