@@ -6,7 +6,9 @@ r"""Multi-seed runs and hyperparameter sweeps of the PPO training, as Ray Tune t
 
 Every trial is one run of ``training.ppo.train`` (the same code and config as a single run:
 ``--config``, then ``--set`` values, then the trial's grid values and seed), in its own Tune
-trial process with one CPU and one torch thread. When training ends, the final network is
+trial process with ``--cpus-per-trial`` CPUs (default 1) and one torch thread outside PPO's
+updates (``--set update_threads=2`` with ``--cpus-per-trial 2``: one run at a time on a 2-core
+machine, each alone). When training ends, the final network is
 evaluated alone on ``--eval-episodes`` seeds from 10000 (the selection seeds: never used in
 training, and not the final evaluation's seeds 0, 1, ... of ``training.evaluation.evaluate``);
 the trial
@@ -31,7 +33,7 @@ from training.plumbing.common import CliParser, command, int_in
 from training.plumbing.distributed import connect, shutdown
 from training.plumbing.outputs import command_output, write_file
 
-METRICS = ("steps_mean", "steps_min", "distance_mean_m", "train_wall_s")
+METRICS = ("steps_mean", "steps_min", "distance_mean_m", "env_steps", "train_wall_s")
 
 
 def parse_assignments(items: list[str], flag: str, grid: bool) -> dict[str, list[str] | str]:
@@ -62,7 +64,9 @@ def parse_assignments(items: list[str], flag: str, grid: bool) -> dict[str, list
 
 
 def evaluate_run(run: Path, episodes: int) -> dict[str, float]:
-    """Steps and distance of a run's final network alone on the selection seeds.
+    """Steps and distance of the network a run publishes, alone on the selection seeds.
+
+    With the env steps the run trained (it may have stopped by its own rule).
 
     They start at 10000: the final evaluation's seeds (0, 1, ...) stay unseen by the ranking.
     """
@@ -70,7 +74,8 @@ def evaluate_run(run: Path, episodes: int) -> dict[str, float]:
     from training.ppo.config import SELECTION_SEED_OFFSET
     from training.ppo.policy_io import load_policy, policy_actor
 
-    policy, norm, cfg, _ = load_policy(run)
+    policy, norm, cfg, _ = load_policy(run)  # the snapshot the run publishes
+    trained = load_policy(run, "final")[3]["num_timesteps"]
     actor = policy_actor(policy, norm, cfg)
     seeds = range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + episodes)
     eps = run_episodes(actor, cfg.env_kwargs(), seeds, cfg.env_id)
@@ -79,6 +84,7 @@ def evaluate_run(run: Path, episodes: int) -> dict[str, float]:
         "steps_mean": float(steps.mean()),
         "steps_min": float(steps.min()),
         "distance_mean_m": float(np.mean([e["distance_m"] for e in eps])),
+        "env_steps": int(trained),
     }
 
 
@@ -131,6 +137,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--eval-episodes", type=int_in(1, 100_000), default=10)
     ap.add_argument("--ray-address", default="", help="HOST:PORT of a Ray cluster (else local)")
     ap.add_argument("--num-cpus", type=int, default=None, help="CPUs of a local Ray instance")
+    ap.add_argument(
+        "--cpus-per-trial",
+        type=int_in(1, 1024),
+        default=1,
+        help="CPUs a trial holds (2 with --set update_threads=2: each run alone on 2 cores)",
+    )
     ap.add_argument("--name", default="", help="sweep name (default: the config's stem)")
     ap.add_argument("--out-dir", type=Path, default=Path("runs"))
     a = ap.parse_args(argv)
@@ -170,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     connect(True, a.ray_address, a.num_cpus)
     try:
         tuner = tune.Tuner(
-            tune.with_resources(trial, {"cpu": 1}),
+            tune.with_resources(trial, {"cpu": a.cpus_per_trial}),
             param_space=space,
             # trial folders named by their id: the default name lists the settings, with commas
             tune_config=tune.TuneConfig(trial_dirname_creator=lambda t: f"trial_{t.trial_id}"),
