@@ -33,8 +33,21 @@ from .hybrid import (
 )
 from .jit import njit_alloc, njit_noalloc
 from .kinematics import nb_keypoints
+from .model import COL_DAMPING
 from .modes import FORCE_EVENTS, N_GUARDS, EventCode, packed_mode_table
-from .state import FS_H, FS_ROOT, FS_T, ST_IGNORED, ST_MODE, ST_SIDE, ST_STEPS, STATUS_OK
+from .state import (
+    FS_DAMPED,
+    FS_H,
+    FS_ROOT,
+    FS_T,
+    FS_WORK_ABS,
+    FS_WORK_POS,
+    ST_IGNORED,
+    ST_MODE,
+    ST_SIDE,
+    ST_STEPS,
+    STATUS_OK,
+)
 from .stepper import (
     EVENT_STEP_FRACTION,
     H_MIN_S,
@@ -117,6 +130,32 @@ def _reset_map(chs, scs, side, reset, q, qd, root_y, iopt):
 
 
 @njit_noalloc
+def _add_work(ch, fst, tau6, q0, qd0, qdd0, q1, qd1, qdd1, h):
+    """Add one physics step's work to ``fst``: motors' positive and absolute, damping's.
+
+    Over a step the motor torques hold, so joint j's work is exactly tau_j (q1_j - q0_j); its
+    positive part (the step's net work where it is positive) and its absolute value are
+    summed over the five motors. The damping's dissipation, the integral of D_j qd_j^2 over
+    the step (all six joints), is Simpson's rule with the mid-step rate of the cubic Hermite
+    interpolant of the ends' rates and accelerations, (qd0 + qd1) / 2 + h (qdd0 - qdd1) / 8.
+    """
+    pos = 0.0
+    ab = 0.0
+    for j in range(1, 6):
+        w = tau6[j] * (q1[j] - q0[j])
+        if w > 0.0:
+            pos += w
+        ab += abs(w)
+    damp = 0.0
+    for j in range(6):
+        mid = 0.5 * (qd0[j] + qd1[j]) + 0.125 * h * (qdd0[j] - qdd1[j])
+        damp += ch[j, COL_DAMPING] * (qd0[j] * qd0[j] + 4.0 * mid * mid + qd1[j] * qd1[j])
+    fst[FS_WORK_POS] += pos
+    fst[FS_WORK_ABS] += ab
+    fst[FS_DAMPED] += h * damp / 6.0
+
+
+@njit_noalloc
 # One function of ~170 lines on purpose: the period's event loop (integrate, locate, impact,
 # switch, renumber) shares a dozen scalars per iteration; numba compiles it as one loop with
 # no calls that return tuples, which keeps the period allocation-free (test_jit).
@@ -126,7 +165,7 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
     Args:
         chs, scs: (2, 6, 6), (2, 8) packed chains of both numberings.
         q, qd: (6,) state, updated in place. ist: int64 [mode, side, steps, ignored-mask];
-        fst: float64 [t, root_y], both updated in place.
+        fst: float64 (N_FST,) [t, root_y, next step, the work sums], updated in place.
         tau_table: (4, 5) joint torques [N m] for models 1..4 (a row per model; the torque
             switches with the model).
         iopt, fopt, a, b: packed options and integrator tableau.
@@ -207,6 +246,7 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
                 if _fired(g1, kk, ignored):
                     mask |= 1 << kk
             if mask == 0:
+                _add_work(ch, fst, tau6, q, qd, k1, q1, qd1, W[W_QDD], hh)
                 for j in range(6):
                     q[j] = q1[j]
                     qd[j] = qd1[j]
@@ -219,12 +259,14 @@ def nb_advance_w(chs, scs, q, qd, ist, fst, tau_table, dt, iopt, fopt, a, b, ev,
             if iopt[IO_LOCATE] != 0:
                 th = nb_locate_w(ch, sc, mode, q, qd, tau6, hh, mask, iopt, fopt, a, b, W, S, reuse)
                 t += th * hh
+                nb_evaluate_w(ch, sc, mode, S[S_QH], S[S_QDH], tau6, iopt, fopt, fd, W, fo, g1)
+                _add_work(ch, fst, tau6, q, qd, k1, S[S_QH], S[S_QDH], W[W_QDD], th * hh)
                 for j in range(6):
                     q[j] = S[S_QH][j]
                     qd[j] = S[S_QDH][j]
-                nb_evaluate_w(ch, sc, mode, q, qd, tau6, iopt, fopt, fd, W, fo, g1)
             else:
                 t += hh
+                _add_work(ch, fst, tau6, q, qd, k1, q1, qd1, W[W_QDD], hh)
                 for j in range(6):
                     q[j] = q1[j]
                     qd[j] = qd1[j]

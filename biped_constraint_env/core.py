@@ -34,13 +34,27 @@ from .rewards import (
 from .settings import EnvSettings
 from .simulator import SimState, evaluate
 from .starts import check_start_state, draw_starts
-from .state import FS_ROOT, FS_T, ST_MODE, ST_STEPS, STATUS_NONFINITE, STATUS_TERMINATED
+from .state import (
+    FS_DAMPED,
+    FS_ROOT,
+    FS_T,
+    FS_WORK_ABS,
+    FS_WORK_POS,
+    ST_MODE,
+    ST_STEPS,
+    STATUS_NONFINITE,
+    STATUS_TERMINATED,
+)
 from .tracking import Tracking
 
 BASE_INFO_KEYS = ("mode", "stance_side", "steps_completed", "t", "hip_y", "root_y", "switches",
-                  "events", "termination_reason")  # fmt: skip
+                  "events", "termination_reason", "motor_work_pos_j", "motor_work_abs_j",
+                  "damping_loss_j")  # fmt: skip
 """``info`` keys of every env; the reward's terms (``reward_<term>``) follow, then, when the
-settings ask for them, ``torque`` (PD actions) and ``push_impulse_ns``, ``push_dv_m_s``."""
+settings ask for them, ``torque`` (PD actions) and ``push_impulse_ns``, ``push_dv_m_s``.
+``motor_work_pos_j``, ``motor_work_abs_j``, ``damping_loss_j``: since the episode's start,
+summed at every physics step, the five motors' positive and absolute work and the energy the
+joint damping dissipated [J] (:data:`~.state.N_FST`)."""
 
 NOT_STEPPED = -1
 """Status given to rows that skip a period (autoreset): the compiled period leaves them."""
@@ -259,7 +273,10 @@ class EnvCore:
                    "t": sim.fst.item(row, FS_T), "hip_y": self.hip.item(row, 0),
                    "root_y": sim.fst.item(row, FS_ROOT),
                    "switches": switches, "events": events,
-                   "termination_reason": self._reasons[row]}  # fmt: skip
+                   "termination_reason": self._reasons[row],
+                   "motor_work_pos_j": sim.fst.item(row, FS_WORK_POS),
+                   "motor_work_abs_j": sim.fst.item(row, FS_WORK_ABS),
+                   "damping_loss_j": sim.fst.item(row, FS_DAMPED)}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms[row].tolist(), strict=True))
         else:
             switches = np.empty(self.n, dtype=object)
@@ -273,7 +290,10 @@ class EnvCore:
                    "t": sim.fst[:, FS_T].copy(), "hip_y": self.hip[:, 0].copy(),
                    "root_y": sim.fst[:, FS_ROOT].copy(),
                    "switches": switches, "events": events,
-                   "termination_reason": self._reasons.copy()}  # fmt: skip
+                   "termination_reason": self._reasons.copy(),
+                   "motor_work_pos_j": sim.fst[:, FS_WORK_POS].copy(),
+                   "motor_work_abs_j": sim.fst[:, FS_WORK_ABS].copy(),
+                   "damping_loss_j": sim.fst[:, FS_DAMPED].copy()}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms.T.copy(), strict=True))
         if self._pd:  # the period's time-mean PD torque
             out["torque"] = self.buf.act[row].copy() if one else self.buf.act.copy()

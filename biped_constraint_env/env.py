@@ -253,7 +253,9 @@ class ConstrainedBipedEnv(gym.Env):
       weights; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``, draw for draw); ground slopes:
       ``BipedParams.slope_rad`` and ``perturbations["slope_rad"]`` (a constant or a range
       drawn per episode), gravity turned by the slope in the ground's frame; the render draws
-      the slope.
+      the slope. Added: ``info["motor_work_pos_j"]``, ``["motor_work_abs_j"]`` and
+      ``["damping_loss_j"]``, the motors' positive and absolute work and the joint damping's
+      loss since the episode's start, summed at every physics step.
 
     Example:
         >>> import gymnasium as gym

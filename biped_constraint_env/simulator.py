@@ -36,6 +36,7 @@ from .state import (
     FS_ROOT,
     FS_T,
     MAX_EVENTS,
+    N_FST,
     ST_IGNORED,
     ST_MODE,
     ST_SIDE,
@@ -120,7 +121,8 @@ def step(
         [int(state.mode), state.stance_side, state.steps_completed, state.recorded_violations],
         np.int64,
     )
-    fst = np.array([state.t, state.root_y, state.next_step_s])
+    fst = np.zeros(N_FST)
+    fst[:3] = (state.t, state.root_y, state.next_step_s)
     ev = np.zeros((MAX_EVENTS, 5))
     forces = np.zeros(N_FORCES)
     status, nev = nb_advance(

@@ -21,8 +21,11 @@ MAX_EVENTS = 16
 """Capacity of the per-control-period event buffer."""
 EV_T, EV_CODE, EV_FROM, EV_TO, EV_TERMINAL = range(5)
 ST_MODE, ST_SIDE, ST_STEPS, ST_IGNORED = range(4)
-FS_T, FS_ROOT, FS_H = range(3)
-N_FST = 3
+FS_T, FS_ROOT, FS_H, FS_WORK_POS, FS_WORK_ABS, FS_DAMPED = range(6)
+N_FST = 6
+"""Float state: time [s], root position [m], next step [s]; then, summed over every physics
+step since the start, the motors' positive work, their absolute work and the energy the joint
+damping dissipated [J] (:func:`~.advance.nb_advance_w`)."""
 STATUS_OK, STATUS_TERMINATED, STATUS_NONFINITE = 0, 1, 2
 
 
@@ -162,7 +165,8 @@ class SimArrays:
             state.steps_completed,
             state.recorded_violations,
         )
-        self.fst[i] = (state.t, state.root_y, state.next_step_s)
+        self.fst[i] = 0.0  # the work sums start with the episode
+        self.fst[i, :3] = (state.t, state.root_y, state.next_step_s)
         self.status[i] = STATUS_OK
         self.n_events[i] = 0
         self.forces[i] = 0.0 if forces is None else forces
