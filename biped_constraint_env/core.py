@@ -17,6 +17,7 @@ import numpy as np
 
 from .actions import TORQUE_ACTIONS, action_config, validate_actions
 from .clock import ContactClock
+from .command import CommandReward, Commands
 from .gait import GaitReward
 from .model import N_ACTUATED
 from .modes import EventCode
@@ -83,7 +84,7 @@ class EnvCore:
         """Allocate the rows' buffers, clock, tracking task and perturbations."""
         s, p, a = settings, settings.physics, settings.action
         self.settings, self.n = s, n
-        self.observation_space = observation_space(s.observation.phase_obs)
+        self.observation_space = observation_space(s.observation.phase_obs, s.command is not None)
         self.clock = ContactClock(n, p.dt) if s.needs_clock else None
         self.tracking = Tracking(n, s, self.clock) if (s.needs_reference or a.pd) else None
         env_weights = (s.reward.weights if s.reward.kind == "env"
@@ -100,6 +101,9 @@ class EnvCore:
             self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(np.ones(n, np.int64))
         self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
         self.gait = GaitReward(s.reward, p.dt, n) if s.reward.kind == "gait" else None
+        self.commands = None if s.command is None else Commands(n, s.command)
+        self.command_reward = (CommandReward(s.reward, p.dt, n) if s.reward.kind == "command"
+                               else None)  # fmt: skip
         self.reward = REWARD_PARTS[s.reward.kind]()
         self.terminations = [] if s.max_model_time_s is None else [self._held_too_long]
         self._pd = a.pd
@@ -108,14 +112,15 @@ class EnvCore:
         self.reward_keys = s.reward.info_keys
         self.info_keys = BASE_INFO_KEYS + self.reward_keys + (
             (("torque",) if a.pd else ()) + (("push_impulse_ns", "push_dv_m_s")
-                                             if self._pushes else ()))  # fmt: skip
+                                             if self._pushes else ())
+            + (("command_m_s",) if self.commands is not None else ()))  # fmt: skip
         self._terms = np.zeros((n, len(self.reward_keys)))
         self._reasons = np.full(n, None, dtype=object)
         self._any_reason = False
         self._one = np.zeros(1, bool)  # the single env's terminated flag, reused
 
     # ------------------------------------------------------------------ starts
-    def draw_starts(self, idx: np.ndarray, rngs) -> None:
+    def draw_starts(self, idx: np.ndarray, rngs, command: float | None = None) -> None:
         """Drawn starts of rows ``idx`` (row ``idx[k]`` from ``rngs[k]``), clocks started.
 
         With the reference, its reference-state starts and clock placement
@@ -131,8 +136,19 @@ class EnvCore:
             if self.clock is not None:
                 self.clock.start(idx, self.sim.ist[idx, ST_MODE], self.sim.qd[idx])
         self.perturb.start(idx, rngs)
+        self._start_commands(idx, rngs, command)
 
-    def set_starts(self, idx: np.ndarray, state: SimState, rngs) -> None:
+    def _start_commands(self, idx, rngs, command: float | None) -> None:
+        """The rows' commands: ``command`` held (``reset(options={"command": v})``) or drawn."""
+        if self.commands is not None:
+            self.commands.start(idx, rngs, self.sim.fst[idx, FS_T], command)
+        elif command is not None:
+            raise ValueError("reset option 'command' needs an env with a command "
+                             "(task='command' or the command option)")  # fmt: skip
+
+    def set_starts(
+        self, idx: np.ndarray, state: SimState, rngs, command: float | None = None
+    ) -> None:
         """Rows ``idx`` start at the given (checked) ``state`` (``reset(options=...)``)."""
         p = self.settings.physics
         check_start_state(p.params, state)
@@ -145,6 +161,7 @@ class EnvCore:
             else:
                 self.clock.start(idx, self.sim.ist[idx, ST_MODE], self.sim.qd[idx])
         self.perturb.start(idx, rngs)
+        self._start_commands(idx, rngs, command)
 
     # ------------------------------------------------------------------ the period
     def period(self, actions: np.ndarray, rngs, skip: np.ndarray | None = None):
@@ -167,9 +184,12 @@ class EnvCore:
         buf, sim = self.buf, self.sim
         if self._pd_follows:  # the targets' bases at the clocks and models (new starts too)
             buf.tgt[:], buf.rate[:] = self.tracking.bases(sim.ist[:, ST_MODE])
-        if self.perturb.active:  # pushes due now (stepped rows); the delayed actions
+        if self.perturb.active or self.commands is not None:
             rows = range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
-            actions = self.perturb.before_period(actions.astype(np.float64), rngs, rows)
+            if self.perturb.active:  # pushes due now (stepped rows); the delayed actions
+                actions = self.perturb.before_period(actions.astype(np.float64), rngs, rows)
+            if self.commands is not None:  # commands due for resampling
+                self.commands.before_period(sim.fst[:, FS_T], rngs, rows)
         buf.act[:] = actions
         return actions
 
@@ -249,10 +269,12 @@ class EnvCore:
         ``rows`` (default all).
         """
         obs = self.buf.obs
-        if self.clock is not None:
+        if self.clock is not None or self.commands is not None:
             parts = [obs]
             if self.settings.observation.phase_obs:
                 parts.append(self.clock.features())
+            if self.commands is not None:
+                parts.append(self.commands.features())
             obs = np.concatenate(parts, axis=1) if len(parts) > 1 else obs
         if self._noisy:
             obs = self.perturb.observe(obs, rngs, range(self.n) if rows is None else rows)
@@ -301,4 +323,6 @@ class EnvCore:
             p = self.perturb
             out["push_impulse_ns"] = p.push_ns.item(row) if one else p.push_ns.copy()
             out["push_dv_m_s"] = p.push_dv.item(row) if one else p.push_dv.copy()
+        if self.commands is not None:  # the command the next period runs under
+            out["command_m_s"] = self.commands.v.item(row) if one else self.commands.v.copy()
         return out

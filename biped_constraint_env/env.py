@@ -15,6 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .actions import validate_action
+from .command import split_reset_options
 from .core import EnvCore
 from .model import N_ACTUATED
 from .settings import ENV_ARGUMENTS as SETTINGS_ARGUMENTS
@@ -148,7 +149,8 @@ class ConstrainedBipedEnv(gym.Env):
 
     | Parameter | Default (``task="walk"``) | ``task="paper"`` | Description (unit) |
     |-----------|---------|---------|--------------------|
-    | task | "walk" | | "walk", "track" (learning from the reference walk) or "paper" |
+    | task | "walk" | | "walk", "track" (learning from the reference walk), "command" (a |
+    | | | | commanded speed, :mod:`.command`) or "paper" |
     | preset | "default" | "paper" | "default" (error-controlled RK4_LIMEX), "fixed_step" |
     | | | | (RK4_LIMEX, 2.5 ms), "fast" (RK2, 5 ms), "paper" |
     | dt | 0.005 | 0.02 | control period [s] |
@@ -183,6 +185,11 @@ class ConstrainedBipedEnv(gym.Env):
     |  |  |  | robustness studies set, validated together; ``slope_rad``: the ground's |
     |  |  |  | slope [rad], a constant or drawn per episode from (lo, hi), gravity turned |
     |  |  |  | by it in the ground's frame, where every position and speed is measured) |
+    | command | None | | dict: the commanded forward speed [m/s] (one more observation |
+    | | | | entry, ``info["command_m_s"]``): "range" (lo, hi), "zero_fraction", |
+    | | | | "resample_s" (lo, hi) or None (held); ``task="command"``: (0, 2), 0.1, |
+    | | | | (1, 5); ``set_command(v)``, ``reset(options={"command": v})``; needs |
+    | | | | ``reward="command"`` (:mod:`.command`) |
     | render_mode | None | | "rgb_array" or "human" |
 
     ## Learning
@@ -253,7 +260,9 @@ class ConstrainedBipedEnv(gym.Env):
       weights; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``, draw for draw); ground slopes:
       ``BipedParams.slope_rad`` and ``perturbations["slope_rad"]`` (a constant or a range
       drawn per episode), gravity turned by the slope in the ground's frame; the render draws
-      the slope. Added: ``info["motor_work_pos_j"]``, ``["motor_work_abs_j"]`` and
+      the slope. Added: ``task="command"`` (a commanded forward speed, observed, resampled,
+      settable with ``set_command`` and ``reset(options={"command": v})``; the ``command``
+      option and ``reward="command"``, no recorded motion). Added: ``info["motor_work_pos_j"]``, ``["motor_work_abs_j"]`` and
       ``["damping_loss_j"]``, the motors' positive and absolute work and the joint damping's
       loss since the episode's start, summed at every physics step.
 
@@ -311,10 +320,11 @@ class ConstrainedBipedEnv(gym.Env):
         super().reset(seed=seed)
         self._needs_reset = True  # stays so if this reset is refused
         rngs = self._rngs = [self.np_random]  # this episode's generator (seeded above)
+        options, command = split_reset_options(options)
         if options is not None and not (isinstance(options, dict) and not options):
-            self.core.set_starts(self._rows, state_from_options(options), rngs)
+            self.core.set_starts(self._rows, state_from_options(options), rngs, command)
         else:
-            self.core.draw_starts(self._rows, rngs)
+            self.core.draw_starts(self._rows, rngs, command)
         self.core.buf.observe()
         self.core.clear_period()
         self._needs_reset = False
@@ -343,6 +353,15 @@ class ConstrainedBipedEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return self.core.observation(rngs)[0], float(rewards[0]), done, truncated, info
+
+    def set_command(self, v: float) -> None:
+        """Set the commanded forward speed [m/s], as a joystick would (``task="command"``).
+
+        It holds until the next reset (no resampling); the next observation carries it.
+        """
+        if self.core.commands is None:
+            raise ValueError("set_command needs an env with a command (task='command')")
+        self.core.commands.set(v)
 
     def render(self):
         """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""

@@ -7,6 +7,7 @@ from gymnasium import spaces
 from numba import njit
 
 from .clock import PHASE_HIGH, PHASE_LOW
+from .command import COMMAND_OBS_HIGH, COMMAND_OBS_LOW
 from .hybrid import nb_wrap
 from .jit import njit_noalloc
 from .kinematics import NK, nb_hip_kinematics
@@ -114,13 +115,17 @@ def nb_observe(CHS, SCS, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
         )
 
 
-def observation_space(phase_obs: bool = False) -> spaces.Box:
+def observation_space(phase_obs: bool = False, command: bool = False) -> spaces.Box:
     """The observation Box (bounds in the env docstring's table).
 
-    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended.
+    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended, then with
+    ``command`` the commanded speed (:mod:`.command`).
     """
     low, high = [OBS_LOW], [OBS_HIGH]
     if phase_obs:
         low.append(PHASE_LOW)
         high.append(PHASE_HIGH)
+    if command:
+        low.append(COMMAND_OBS_LOW)
+        high.append(COMMAND_OBS_HIGH)
     return spaces.Box(np.concatenate(low), np.concatenate(high), dtype=np.float64)

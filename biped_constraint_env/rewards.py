@@ -93,6 +93,34 @@ REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
         ),
         RewardTerm("step", 1.0, doc="weight per completed walking step"),
     ),
+    "command": (
+        RewardTerm(
+            "speed",
+            0.4,
+            4.0,
+            target=1.1,
+            doc="kernel of (the period's mean hip speed - the command [m/s])^2; the target: the "
+            "speed the cadence targets are made for",
+        ),
+        RewardTerm("height", 0.2, 50.0, target=2.95, doc="kernel of (hip height - target [m])^2"),
+        RewardTerm(
+            "swing",
+            0.2,
+            1.0,
+            doc="models 1, 2: kernel of min(0, swing ankle speed - the command [m/s])^2; "
+            "models 3, 4: the weight",
+        ),
+        RewardTerm(
+            "cadence",
+            0.2,
+            50.0,
+            target=(0.6, 0.25, 0.15, 0.1),
+            doc="kernel of max(0, time in the model - target x stretch [s])^2, stretched at "
+            "slow commands; the weight at a zero command",
+            per_model=True,
+        ),
+        RewardTerm("step", 10.0, doc="weight x min(1, command / speed target) per step"),
+    ),
 }
 """The reward kinds and their terms. The tracking kernels' weights sum to 1 (a period on the
 reference earns 1) and each halves its term at an error of about 0.37 rad (one angle),
@@ -198,8 +226,9 @@ def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
                                      target_names).items():  # fmt: skip
         targets[name] = _target(name, value, name in per_model)
     gated = spec.get("gated", False)
-    if gated is not False and kind != "gait":
-        raise ValueError(f"reward 'gated' is a setting of the 'gait' reward, not {kind!r}'s")
+    if gated is not False and kind not in ("gait", "command"):
+        raise ValueError(f"reward 'gated' is a setting of the 'gait' and 'command' rewards, "
+                         f"not {kind!r}'s")  # fmt: skip
     if not isinstance(gated, bool):
         raise ValueError(f"reward 'gated' must be a bool, got {gated!r}")
     return RewardSettings(kind, tuple(weights[n] for n in names),
@@ -334,5 +363,27 @@ class GaitRewardPart:
         return out[:, :-1], out[:, -1].copy()
 
 
-REWARD_PARTS = {"env": EnvRewardPart, "tracking": TrackingRewardPart, "gait": GaitRewardPart}
+class CommandRewardPart:
+    """``reward="command"``: the gait terms against each row's command (``core.commands``)."""
+
+    def before(self, core):
+        """The steps completed, the hip's y and the commands before the period."""
+        return (core.sim.ist[:, ST_STEPS].copy(), core.hip[:, 0].copy(),
+                core.commands.v.copy())  # fmt: skip
+
+    def after(self, core, snap, terminated, skip):
+        """(terms, rewards) of the period against the command it ran under."""
+        steps0, hip_y0, command = snap
+        sim = core.sim
+        swing_vy = core.command_reward.swing_ankle_vy(core.buf.chs, sim.q, sim.qd, sim.ist)
+        out = core.command_reward.terms(command, core.hip[:, 0] - hip_y0, core.hip[:, 1],
+                                        swing_vy, sim.ist[:, ST_MODE], core.clock.model_time_s(),
+                                        sim.ist[:, ST_STEPS] - steps0, ~terminated)  # fmt: skip
+        if skip is not None:
+            out[skip] = 0.0
+        return out[:, :-1], out[:, -1].copy()
+
+
+REWARD_PARTS = {"env": EnvRewardPart, "tracking": TrackingRewardPart, "gait": GaitRewardPart,
+                "command": CommandRewardPart}  # fmt: skip
 """The part that computes each reward kind's terms after a period, by kind."""

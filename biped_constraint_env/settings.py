@@ -31,6 +31,7 @@ from .actions import (
     check_action_settings,
     check_pd_dt,
 )
+from .command import CommandSettings, command_settings
 from .model import N_ACTUATED, BipedParams, paper_biped
 from .modes import N_MODELS
 from .options import SimOptions
@@ -162,6 +163,8 @@ class EnvSettings:
     fall_hip_height_m: float | None
     max_model_time_s: float | None = None
     time_limit_s: float | None = EPISODE_S
+    command: CommandSettings | None = None
+    """The commanded speed (:mod:`.command`; None: no command)."""
 
     @property
     def dt(self) -> float:
@@ -180,7 +183,7 @@ class EnvSettings:
     @property
     def needs_clock(self) -> bool:
         """Whether the env keeps a contact clock (phase observed, the gait reward, a reference)."""
-        return (self.observation.phase_obs or self.reward.kind == "gait"
+        return (self.observation.phase_obs or self.reward.kind in ("gait", "command")
                 or self.max_model_time_s is not None or self.needs_reference)  # fmt: skip
 
     def as_dict(self) -> dict[str, Any]:
@@ -209,6 +212,9 @@ class EnvSettings:
             out[name] = {f.name: plain(getattr(group, f.name)) for f in dataclasses.fields(group)}
         out["start"]["start"] = start_name(self.start.start)
         out["reward"] = self.reward.as_dict()
+        out["command"] = None if self.command is None else {
+            f.name: plain(getattr(self.command, f.name)) for f in dataclasses.fields(self.command)
+        }  # fmt: skip
         return out
 
 
@@ -268,12 +274,16 @@ def _offsets(offset: Any) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(r.tolist()) for r in rows)
 
 
-def _with_kind(spec: Any, task_kind: str) -> Any:
-    """The ``reward`` kwarg with the task's kind where it names none (None: the task's)."""
+def _with_kind(spec: Any, task_reward: str | dict) -> Any:
+    """The ``reward`` kwarg on top of the task's (a kind, or a dict of the reward's settings).
+
+    None: the task's; a dict naming no kind, or the task's kind: merged onto the task's.
+    """
+    task = {"kind": task_reward} if isinstance(task_reward, str) else task_reward
     if spec is None:
-        return task_kind
-    if isinstance(spec, dict) and "kind" not in spec:
-        return {**spec, "kind": task_kind}
+        return task_reward
+    if isinstance(spec, dict) and spec.get("kind", task["kind"]) == task["kind"]:
+        return {**task, **spec}
     return spec
 
 
@@ -327,6 +337,7 @@ def make_settings(
     rsi: float | None = None,
     action: str | dict | None = None,
     perturbations: dict[str, Any] | None = None,
+    command: dict[str, Any] | None = None,
     **unknown: Any,
 ) -> EnvSettings:
     """Validate the env's keyword arguments (``ConstrainedBipedEnv``'s docstring) once.
@@ -341,7 +352,8 @@ def make_settings(
     check_names("argument(s) of ConstrainedBiped-v0", unknown, ENV_ARGUMENTS + ("render_mode",))
     params = paper_biped() if params is None else params
     t = resolve_task(task, preset=preset, dt=dt, stop_at_switch=stop_at_switch, start=start,
-                     reward=reward, rsi=rsi, action=action, phase_obs=phase_obs)  # fmt: skip
+                     reward=reward, rsi=rsi, action=action, phase_obs=phase_obs,
+                     command=command)  # fmt: skip
     sim_overrides = dict(
         integrator=integrator, substeps=substeps, impact=impact, locate_events=locate_events,
         jdot=jdot, strict=strict, heel_force_includes_foot_weight=heel_force_includes_foot_weight,
@@ -353,6 +365,11 @@ def make_settings(
     task_action = TASKS[task].get("action", "torque")
     weights = dict(zip(ENV_WEIGHT_KWARGS, (forward_reward_weight, alive_bonus, switch_bonus,
                                            step_bonus, ctrl_cost_weight), strict=True))  # fmt: skip
+    reward_s = reward_settings(_with_kind(reward, TASKS[task].get("reward", "env")), weights)
+    commands = command_settings(t.get("command"))
+    if (reward_s.kind == "command") != (commands is not None):
+        raise ValueError("reward='command' and the command option go together: reward kind "
+                         f"{reward_s.kind!r}, command {t.get('command')!r}")  # fmt: skip
     return EnvSettings(
         task=task,
         physics=PhysicsSettings(params, t["preset"], options, dt),
@@ -363,7 +380,7 @@ def make_settings(
             check_real("rsi", t["rsi"], 0.0, 1.0),
         ),  # fmt: skip
         action=_action_settings(action, task_action, torque_limit_nm, out_of_range, dt),
-        reward=reward_settings(_with_kind(reward, TASKS[task].get("reward", "env")), weights),
+        reward=reward_s,
         observation=ObservationSettings(check_bool("phase_obs", t["phase_obs"])),
         perturbations=perturbation_settings(perturbations),
         reference=_reference(reference, start_kind),
@@ -374,6 +391,7 @@ def make_settings(
         else check_real(
             "time_limit_s", time_limit_s, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"
         ),
+        command=commands,
     )
 
 

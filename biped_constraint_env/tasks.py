@@ -35,6 +35,7 @@ TASK_DEFAULTS: dict[str, Any] = {
     "rsi": 0.0,
     "action": "torque",
     "phase_obs": False,
+    "command": None,
 }
 """The learning-task settings every task starts from (the env's own reward, torques)."""
 
@@ -55,6 +56,15 @@ TASKS: dict[str, dict[str, Any]] = {
         "action": {"kind": "pd", "around": "reference", "offset": TRACK_PD_OFFSET_RAD},
         "phase_obs": True,
     },
+    "command": {
+        "preset": "default",
+        "dt": 0.02,
+        "stop_at_switch": True,
+        "start": "rest",
+        "reward": {"kind": "command", "gated": True},
+        "phase_obs": True,
+        "command": {"range": (0.0, 2.0), "zero_fraction": 0.1, "resample_s": (1.0, 5.0)},
+    },
     "paper": {
         "preset": "paper",
         "dt": PAPER_SAMPLE_TIME_S,
@@ -67,8 +77,10 @@ TASKS: dict[str, dict[str, Any]] = {
 task set up for learning from the recorded reference walk (the from-scratch recipe's task:
 tracking reward, half the starts at reference states, PD targets about the reference pose with
 the stance-ankle offset, the contact clock observed); every one of these settings can still
-be given. ``task="paper"``: the paper's setting (its numerics, 20 ms, torques held through
-switches, start at rest in model 1)."""
+be given. ``task="command"``: a commanded forward speed (:mod:`.command`: 0-2 m/s, 10% zero,
+resampled every 1-5 s, observed), the command reward (no recorded motion), 20 ms torques, the
+contact clock observed, the start at rest. ``task="paper"``: the paper's setting (its
+numerics, 20 ms, torques held through switches, start at rest in model 1)."""
 
 EPISODE_S = 30.0
 """An episode's time limit by default [s] of simulated time (``time_limit_s``): at any control

@@ -20,6 +20,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .actions import validate_actions
+from .command import split_reset_options
 from .core import EnvCore
 from .model import N_ACTUATED
 from .settings import make_settings
@@ -98,10 +99,23 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         """The batch with its settings."""
         return f"ConstrainedBipedVectorEnv(num_envs={self.num_envs}, {self.settings!r})"
 
-    def _reset_rows(self, idx: np.ndarray) -> None:
+    def _reset_rows(self, idx: np.ndarray, command: float | None = None) -> None:
         """Drawn starts for rows ``idx`` (each from its own generator, as the single env)."""
-        self.core.draw_starts(idx, [self._rngs[i] for i in idx])
+        self.core.draw_starts(idx, [self._rngs[i] for i in idx], command)
         self._elapsed[idx] = 0
+
+    def set_command(self, values) -> None:
+        """Set the commanded forward speeds [m/s]: one value for all rows or one per row.
+
+        They hold until each row's next reset (an automatic reset draws a new command);
+        the next observation carries them. ValueError without a command (``task="command"``).
+        """
+        if self.core.commands is None:
+            raise ValueError("set_command needs an env with a command (task='command')")
+        vals = np.asarray(values, dtype=np.float64)
+        if vals.shape not in ((), (self.num_envs,)):
+            raise ValueError(f"set_command takes one value or {self.num_envs}, got {vals.shape}")
+        self.core.commands.set(vals)
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-environment; ``seed`` s seeds sub-environment i with s + i."""
@@ -109,11 +123,12 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         if seed is not None:
             seeds = check_seeds(seed, self.num_envs)
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        options, command = split_reset_options(options)
         if options is not None and not (isinstance(options, dict) and not options):
-            self.core.set_starts(self._all, state_from_options(options), self._rngs)
+            self.core.set_starts(self._all, state_from_options(options), self._rngs, command)
             self._elapsed[:] = 0
         else:
-            self._reset_rows(self._all)
+            self._reset_rows(self._all, command)
         self._autoreset[:] = False
         self.core.buf.observe()
         self.core.clear_period()

@@ -1,7 +1,7 @@
 """One direction of dependency: jit (how the core is compiled) and validation (argument
 checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> the simulator
 (state -> options -> stepper -> advance -> simulator, its Python API) -> the env's parts
-(tasks, actions, starts, rewards, gait, observation, reference, perturbations) ->
+(tasks, actions, starts, rewards, gait, command, observation, reference, perturbations) ->
 settings (all the env's arguments, validated once) -> tracking -> period (the compiled control
 period) -> core (N rows around it: starts, reasons, rewards, info) -> env (its one-row case) ->
 vector_env.
@@ -38,6 +38,7 @@ LAYERS = [
     "starts",
     "rewards",
     "gait",
+    "command",
     "clock",
     "observation",
     "reference",

@@ -45,7 +45,7 @@ def test_paper_task_and_overrides():
     assert gym.make("ConstrainedBiped-v0", **fixed).unwrapped.options.substeps == 2  # 2.5 ms
     assert gym.make("ConstrainedBiped-v0", dt=0.007, **fixed).unwrapped.options.substeps == 3
     assert gym.make("ConstrainedBiped-v0", substeps=5).unwrapped.options.substeps == 5
-    assert set(TASKS) == {"walk", "track", "paper"}
+    assert set(TASKS) == {"walk", "track", "command", "paper"}
 
 
 def test_vector_env_takes_the_same_task():

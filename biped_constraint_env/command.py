@@ -1,0 +1,205 @@
+"""The command task: a commanded forward speed, observed, resampled, and the reward that follows it.
+
+``command={"range": (lo, hi), "zero_fraction": p, "resample_s": (lo, hi)}`` (``task="command"``
+sets it: 0-2 m/s, 10% zero, a new command every 1-5 s): each row holds a commanded forward speed
+[m/s], drawn at its start (zero with probability ``zero_fraction``, else uniform in ``range``)
+and again every U(``resample_s``) seconds of simulated time (``resample_s=None``: one command
+per episode), from the row's own generator, after the start's and the perturbations' draws.
+The observation appends it (one entry, ``command_m_s``). A user sets it as a joystick would:
+``env.unwrapped.set_command(v)`` (the batched env: one value per row), or
+``reset(options={"command": v})``; a command set so holds until the next reset (no resampling).
+
+The reward (``reward="command"``) has no recorded motion: the terms of the gait reward
+(:mod:`.gait`) with the command in place of its constant speed target, and a contact clock that
+stops at a zero command:
+
+* ``speed``: weight * exp(-kernel * (hip progress / dt - command)^2) (kernel 4: the field's
+  exp(-e^2 / 0.25); at a zero command it pays for standing still);
+* ``height``: weight * exp(-kernel * (hip height - target)^2);
+* ``swing``: models 1, 2: weight * exp(-kernel * min(0, swing ankle speed - command)^2), the
+  swing foot carried forward at least at the command; models 3, 4: the weight;
+* ``cadence``: weight * exp(-kernel * max(0, time in the model - target * stretch)^2), the
+  targets (per model) stretched at slow commands by ``min(3, speed target / command)``; at a
+  zero command the full weight (any contact state may be held: standing);
+* ``step``: weight * min(1, command / speed target) per completed step (none at zero).
+
+``gated`` multiplies the speed, height and swing terms by the cadence kernel, as the gait reward.
+Every term is positive; a period ended by an event earns only its steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .gait import SWING_MODELS
+from .kinematics import nb_swing_ankle_vy
+from .rewards import REWARD_KINDS, RewardSettings
+from .validation import check_mapping, check_real
+
+MAX_COMMAND_M_S = 5.0
+"""Largest commanded speed accepted [m/s] (either way)."""
+COMMAND_KEYS = ("range", "zero_fraction", "resample_s")
+"""Keys of the ``command`` dict."""
+COMMAND_OBS_LOW = np.array([-MAX_COMMAND_M_S])
+COMMAND_OBS_HIGH = np.array([MAX_COMMAND_M_S])
+MAX_STRETCH = 3.0
+"""The most a slow command stretches the cadence targets (a command of a third of the speed
+target and below)."""
+COMMAND_TERMS = tuple(t.name for t in REWARD_KINDS["command"])
+"""The command reward's terms, in order."""
+
+
+@dataclass(frozen=True)
+class CommandSettings:
+    """The validated ``command`` option (see the module docstring); None in the env: off."""
+
+    range: tuple[float, float] = (0.0, 2.0)
+    zero_fraction: float = 0.1
+    resample_s: tuple[float, float] | None = (1.0, 5.0)
+
+
+def _pair(name: str, value: Any, lo: float, hi: float, unit: str) -> tuple[float, float]:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        value = (value, value)
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        raise ValueError(f"command {name} must be a number or (low, high), got {value!r}")
+    a = check_real(f"command {name}", value[0], lo, hi, unit=unit)
+    b = check_real(f"command {name}", value[1], lo, hi, unit=unit)
+    if a > b:
+        raise ValueError(f"command {name} must be (low, high) with low <= high, got {value!r}")
+    return a, b
+
+
+def command_settings(spec: Any) -> CommandSettings | None:
+    """The ``command`` kwarg (None, or a dict of :data:`COMMAND_KEYS`) validated."""
+    if spec is None:
+        return None
+    check_mapping("command", spec, COMMAND_KEYS)
+    d = CommandSettings()
+    resample = spec.get("resample_s", d.resample_s)
+    return CommandSettings(
+        range=_pair("range", spec.get("range", d.range), -MAX_COMMAND_M_S, MAX_COMMAND_M_S,
+                    " [m/s]"),  # fmt: skip
+        zero_fraction=check_real("command zero_fraction", spec.get("zero_fraction",
+                                                                   d.zero_fraction), 0.0, 1.0),
+        resample_s=None if resample is None else _pair("resample_s", resample, 0.02, 1e4, " [s]"),
+    )  # fmt: skip
+
+
+def check_command(value: Any) -> float:
+    """A commanded speed [m/s] given by a user (``set_command``, ``reset`` options)."""
+    return check_real("command", value, -MAX_COMMAND_M_S, MAX_COMMAND_M_S, unit=" [m/s]")
+
+
+def split_reset_options(options: Any) -> tuple[Any, float | None]:
+    """``reset(options=...)`` as (the start's options or None, the command or None).
+
+    ``{"command": v}`` alone draws the start as usual and holds the command ``v``.
+    """
+    if not isinstance(options, dict) or "command" not in options:
+        return options, None
+    rest = {k: v for k, v in options.items() if k != "command"}
+    return (rest or None), check_command(options["command"])
+
+
+class Commands:
+    """The commanded speeds of N rows, their next resampling times and who set them."""
+
+    def __init__(self, n: int, settings: CommandSettings):
+        """Commands of ``n`` rows, drawn as ``settings`` says."""
+        self.s = settings
+        self.v = np.zeros(n)
+        self.next_t = np.full(n, np.inf)
+
+    def _draw(self, rng) -> float:
+        s = self.s
+        if rng.random() < s.zero_fraction:
+            return 0.0
+        lo, hi = s.range
+        return lo if lo == hi else float(rng.uniform(lo, hi))
+
+    def _next(self, rng, t: float) -> float:
+        if self.s.resample_s is None:
+            return np.inf
+        lo, hi = self.s.resample_s
+        return t + (lo if lo == hi else float(rng.uniform(lo, hi)))
+
+    def start(self, idx, rngs, t, given: float | None = None) -> None:
+        """New episodes in rows ``idx`` at times ``t`` (row ``idx[k]`` drawing from ``rngs[k]``).
+
+        ``given``: the command of ``reset(options={"command": v})``, held (nothing drawn).
+        """
+        for k, i in enumerate(np.asarray(idx)):
+            if given is None:
+                self.v[i] = self._draw(rngs[k])
+                self.next_t[i] = self._next(rngs[k], float(t[k]))
+            else:
+                self.v[i], self.next_t[i] = given, np.inf
+
+    def set(self, values, rows=None) -> None:
+        """Set the commands of ``rows`` (default all) [m/s]; they hold until the next reset."""
+        rows = np.arange(self.v.shape[0]) if rows is None else np.asarray(rows)
+        vals = np.broadcast_to(np.asarray(values, dtype=np.float64), rows.shape)
+        self.v[rows] = [check_command(float(x)) for x in vals]
+        self.next_t[rows] = np.inf
+
+    def before_period(self, t: np.ndarray, rngs, rows) -> None:
+        """Resample the commands due at the rows' times ``t`` (n,), each from its generator."""
+        for i in rows:
+            if t[i] + 1e-12 >= self.next_t[i]:
+                self.v[i] = self._draw(rngs[i])
+                self.next_t[i] = self._next(rngs[i], float(t[i]))
+
+    def features(self) -> np.ndarray:
+        """(n, 1): the commanded speeds [m/s] (the observation's last entry)."""
+        return self.v[:, None]
+
+
+class CommandReward:
+    """The command reward of N rows (see the module docstring), after each period."""
+
+    def __init__(self, reward: RewardSettings, dt: float, n: int):
+        """For ``reward`` (kind "command"), control period ``dt`` [s] and ``n`` rows."""
+        if reward.kind != "command":
+            raise ValueError(f"CommandReward takes the 'command' reward, not {reward.kind!r}")
+        self.dt = float(dt)
+        self._w = {t: reward.weight(t) for t in COMMAND_TERMS}
+        self._k = {t: reward.kernel(t) for t in COMMAND_TERMS if t != "step"}
+        self._height = reward.target("height")
+        self._speed = reward.target("speed")  # the speed the cadence targets are made for
+        self._cadence = np.zeros(5)  # indexed by the model, 1-4
+        self._cadence[1:] = reward.target("cadence")
+        self._gated = reward.gated
+        self._swing_vy = np.zeros(n)
+
+    def swing_ankle_vy(self, chs, q, qd, ist) -> np.ndarray:
+        """(n,) the swing ankles' forward speeds [m/s] (a view, overwritten by the next call)."""
+        nb_swing_ankle_vy(chs, q, qd, ist, self._swing_vy)
+        return self._swing_vy
+
+    def terms(self, command, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive):
+        """(n, 6): the terms (COMMAND_TERMS order) and their sum, after a period."""
+        w, k = self._w, self._k
+        out = np.empty((len(progress_m), len(COMMAND_TERMS) + 1))
+        out[:, 0] = w["speed"] * np.exp(-k["speed"] * (progress_m / self.dt - command) ** 2)
+        out[:, 1] = w["height"] * np.exp(-k["height"] * (hip_z - self._height) ** 2)
+        short = np.minimum(swing_vy - command, 0.0)
+        free = np.isin(modes, SWING_MODELS)
+        out[:, 2] = np.where(free, w["swing"] * np.exp(-k["swing"] * short**2), w["swing"])
+        moving = command > 0.0
+        stretch = np.where(
+            moving, np.minimum(MAX_STRETCH, self._speed / np.where(moving, command, 1.0)), 1.0
+        )
+        stretch = np.maximum(stretch, 1.0)
+        over = np.maximum(model_time_s - self._cadence[modes] * stretch, 0.0)
+        on_time = np.where(moving, np.exp(-k["cadence"] * over**2), 1.0)
+        out[:, 3] = w["cadence"] * on_time
+        if self._gated:
+            out[:, :3] *= on_time[:, None]
+        out[~alive, :4] = 0.0
+        out[:, 4] = w["step"] * np.clip(command / self._speed, 0.0, 1.0) * steps
+        out[:, 5] = out[:, :5].sum(axis=1)
+        return out

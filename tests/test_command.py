@@ -1,0 +1,88 @@
+"""The command task: a commanded forward speed, observed, resampled, settable, and its reward."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import biped_constraint_env  # noqa: F401
+from biped_constraint_env.command import CommandReward, Commands, CommandSettings
+from biped_constraint_env.settings import make_settings
+
+KW = {"task": "command", "command": {"range": (0.0, 2.0), "zero_fraction": 0.2,
+                                     "resample_s": (0.1, 0.3)}}  # fmt: skip
+
+
+def _vec(n, **kw):
+    return gym.make_vec("ConstrainedBiped-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                        **kw)  # fmt: skip
+
+
+def test_command_is_observed_resampled_from_the_rows_generator_the_same_in_both_envs():
+    single = gym.make("ConstrainedBiped-v0", **KW)
+    venv = _vec(3, **KW)
+    obs_v, info_v = venv.reset(seed=10)
+    seen = []
+    for row in range(3):
+        obs, info = single.reset(seed=10 + row)
+        assert obs[-1] == info["command_m_s"] == obs_v[row, -1] == info_v["command_m_s"][row]
+        cmds = [info["command_m_s"]]
+        for _ in range(40):  # 0.8 s: several resamplings
+            obs, _, term, trunc, info = single.step(np.zeros(5))
+            cmds.append(obs[-1])
+            if term or trunc:
+                break
+        seen.append(cmds)
+    assert all(0.0 <= c <= 2.0 for cmds in seen for c in cmds)
+    assert any(len(set(c)) > 1 for c in seen)  # resampled within the episode
+    obs2, _ = venv.reset(seed=10)
+    assert np.array_equal(obs2, obs_v)  # seeded: the same commands again
+
+
+def test_zero_commands_come_with_the_zero_fraction():
+    c = Commands(2000, CommandSettings(range=(0.5, 1.5), zero_fraction=0.25, resample_s=None))
+    rngs = [np.random.default_rng(s) for s in range(2000)]
+    c.start(np.arange(2000), rngs, np.zeros(2000))
+    zero = c.v == 0.0
+    assert 0.21 < zero.mean() < 0.29 and np.all((c.v[~zero] >= 0.5) & (c.v[~zero] <= 1.5))
+    assert np.all(np.isinf(c.next_t))  # resample_s=None: one command per episode
+
+
+def test_a_user_sets_the_command_as_a_joystick_and_it_holds():
+    kw = {**KW, "command": {**KW["command"], "resample_s": (0.05, 0.1)}}
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    obs, info = env.reset(seed=0, options={"command": 1.5})
+    assert obs[-1] == 1.5 == info["command_m_s"]
+    for _ in range(10):  # 0.2 s: past every resampling time of drawn commands
+        obs, *_ = env.step(np.zeros(5))
+    assert obs[-1] == 1.5
+    env.unwrapped.set_command(0.0)
+    assert env.step(np.zeros(5))[0][-1] == 0.0
+    venv = _vec(2, **KW)
+    venv.reset(seed=0)
+    venv.unwrapped.set_command([0.3, 1.2])
+    assert venv.step(np.zeros((2, 5)))[0][:, -1].tolist() == [0.3, 1.2]
+    with pytest.raises(ValueError, match="command"):
+        env.unwrapped.set_command(float("nan"))
+    with pytest.raises(ValueError, match="needs an env with a command"):
+        gym.make("ConstrainedBiped-v0").unwrapped.set_command(1.0)
+    with pytest.raises(ValueError, match="go together"):
+        gym.make("ConstrainedBiped-v0", reward="command")
+
+
+def test_command_reward_follows_the_command_and_pays_standing_at_zero():
+    s = make_settings(task="command")
+    r = CommandReward(s.reward, s.dt, 2)
+    args = dict(hip_z=np.full(2, 2.95), swing_vy=np.ones(2), modes=np.array([1, 1]),
+                model_time_s=np.array([5.0, 5.0]), steps=np.zeros(2),
+                alive=np.ones(2, bool))  # fmt: skip
+    # hip still, a contact phase held 5 s: at a zero command all but the steps pay in full
+    out = r.terms(np.array([0.0, 1.0]), np.zeros(2), **args)
+    assert out[0, :4].tolist() == pytest.approx([0.4, 0.2, 0.2, 0.2])
+    assert out[1, 0] == 0.0 and out[1, 3] == pytest.approx(0.0, abs=1e-12)  # gated off
+    # walking at the command pays the speed term in full, another speed less
+    moving = dict(args, model_time_s=np.array([0.1, 0.1]))
+    out = r.terms(np.array([1.0, 1.0]), np.array([1.0, 0.6]) * s.dt, **moving)
+    assert out[0, 0] == pytest.approx(0.4) and out[1, 0] == pytest.approx(0.4 * np.exp(-4 * 0.16))
+    out = r.terms(np.array([0.0, 2.0]), np.zeros(2), **dict(moving, steps=np.ones(2)))
+    assert out[:, 4].tolist() == [0.0, 10.0]  # steps pay nothing at a zero command
+    assert np.allclose(out[:, 5], out[:, :5].sum(axis=1))
