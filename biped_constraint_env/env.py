@@ -262,9 +262,10 @@ class ConstrainedBipedEnv(gym.Env):
       drawn per episode), gravity turned by the slope in the ground's frame; the render draws
       the slope. Added: ``task="command"`` (a commanded forward speed, observed, resampled,
       settable with ``set_command`` and ``reset(options={"command": v})``; the ``command``
-      option and ``reward="command"``, no recorded motion). Added: ``info["motor_work_pos_j"]``, ``["motor_work_abs_j"]`` and
-      ``["damping_loss_j"]``, the motors' positive and absolute work and the joint damping's
-      loss since the episode's start, summed at every physics step.
+      option and ``reward="command"``, no recorded motion). Added:
+      ``info["motor_work_pos_j"]``, ``["motor_work_abs_j"]`` and ``["damping_loss_j"]``, the
+      motors' positive and absolute work and the joint damping's loss since the episode's
+      start, summed at every physics step.
 
     Example:
         >>> import gymnasium as gym

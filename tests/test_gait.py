@@ -82,7 +82,7 @@ def test_per_model_cadence_targets_and_the_gate():
         make_settings(reward={"kind": "gait", "targets": {"cadence": [0.6, 0.2]}})
     with pytest.raises(ValueError, match="reward target 'speed'"):
         make_settings(reward={"kind": "gait", "targets": {"speed": [1.0, 1, 1, 1]}})
-    with pytest.raises(ValueError, match="'gated' is a setting of the 'gait' and 'command' rewards"):
+    with pytest.raises(ValueError, match="'gated' is a setting of the 'gait' and 'command'"):
         make_settings(reward={"kind": "tracking", "gated": True})
     with pytest.raises(ValueError, match="'gated' must be a bool"):
         make_settings(reward={"kind": "gait", "gated": 1})

@@ -44,3 +44,14 @@ def test_success_counts_complete_steps():
 
 def test_wilson_is_exact_at_the_ends():
     assert wilson_interval(200, 200)[1] == 1.0 and wilson_interval(0, 200)[0] == 0.0
+
+
+def test_iqm_is_the_mean_of_the_middle_half_with_a_bootstrap_interval_around_it():
+    from training.evaluation.stats import iqm, iqm_interval
+
+    assert iqm([1.0, 2.0, 3.0, 4.0]) == 2.5  # the middle two
+    assert iqm([0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]) == 1.0  # two failures cut
+    assert iqm_interval([1.0] * 5) == (1.0, 1.0, 1.0)
+    centre, lo, hi = iqm_interval([0.0, 0.2, 0.5, 0.9, 1.0, 1.0, 0.95, 0.3], reps=2000)
+    assert lo < centre < hi and 0.0 <= lo and hi <= 1.0
+    assert iqm_interval([0.0, 0.2, 0.5, 0.9, 1.0, 1.0, 0.95, 0.3], reps=2000) == (centre, lo, hi)

@@ -15,12 +15,32 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from biped_constraint_env.model import N_LINKS
 from biped_constraint_env.observation import OBS_FORCES
 from training.evaluation.stats import format_success, success
 
-JOINT_RATES = slice(N_LINKS + 1, 2 * N_LINKS)
-"""The joint rates q-dot 1..5 in the observation (the cost of transport's work)."""
+ENERGY_KEYS = ("motor_work_pos_j", "motor_work_abs_j", "damping_loss_j")
+"""The env's ``info`` sums of the episode's energy (at every physics step)."""
+
+
+def energy(info, weight_n: float, distance_m: float) -> dict:
+    """An episode's energy from its last ``info``: the mechanical cost of transport.
+
+    ``cost_of_transport``: the motors' positive work per weight and distance [1] (summed at
+    every physics step); ``cost_of_transport_abs``: their absolute work so; ``damping_share``:
+    the joint damping's loss over the positive work (what the model's damping alone costs).
+    NaN where the episode did not move forward (or did no work).
+    """
+    pos, ab, damp = (float(info[k]) for k in ENERGY_KEYS)
+    moved = distance_m > 0
+    return {
+        "work_pos_j": pos,
+        "work_abs_j": ab,
+        "damping_loss_j": damp,
+        "cost_of_transport": pos / (weight_n * distance_m) if moved else math.nan,
+        "cost_of_transport_abs": ab / (weight_n * distance_m) if moved else math.nan,
+        "damping_share": damp / pos if pos > 0 else math.nan,
+    }
+
 
 COMPARE_PUSH = {"push_impulse_ns": -0.25, "push_at_s": 2.0}
 """The push of ``--compare``: a backward hip impulse of 0.25 N s (about -0.3 m/s), 2 s into
@@ -71,8 +91,7 @@ def run_episodes(
         if hasattr(actor, "reset"):  # a controller with per-episode memory (a start phase)
             actor.reset()
         y0, t_prev, cost, ret, done = info["hip_y"], 0.0, 0.0, 0.0, False
-        work = 0.0
-        steps, step_t, step_hip, first_m = 0, [], [], None
+        steps, step_t, step_hip, step_work, first_m = 0, [], [], [], None
         while not done:
             if record:
                 record(env, k)
@@ -80,7 +99,6 @@ def run_episodes(
             obs, r, term, trunc, info = env.step(tau)
             applied = info.get("torque", tau)  # PD-target actions: the torques they gave
             cost += float(np.sum(np.square(applied))) * (info["t"] - t_prev)
-            work += float(np.abs(applied * obs[JOINT_RATES]).sum()) * (info["t"] - t_prev)
             t_prev = info["t"]
             ret += r
             done = term or trunc
@@ -88,6 +106,7 @@ def run_episodes(
                 steps = info["steps_completed"]
                 step_t.append(info["t"])
                 step_hip.append(info["hip_y"] - y0)
+                step_work.append(info["motor_work_pos_j"])
                 if first_m is None:  # the new stance toe's advance over the start's [m]
                     first_m = float(env.unwrapped.state.root_y)
         dist = info["hip_y"] - y0
@@ -98,12 +117,13 @@ def run_episodes(
                 "distance_m": dist,
                 "speed_m_s": dist / max(info["t"], 1e-9),
                 "torque_cost": cost / max(dist, 1e-3) if dist > 0 else float("nan"),
-                "cost_of_transport": work / (weight * dist) if dist > 0 else math.nan,
+                **energy(info, weight, dist),
                 "return": ret,
                 "t_s": info["t"],
                 "end": info["termination_reason"] or "time_limit",
                 "step_t_s": step_t,
                 "step_hip_y_m": step_hip,
+                "step_work_pos_j": step_work,
                 "first_step_m": first_m,
             }
         )
@@ -128,10 +148,8 @@ def run_episodes_batched(
     compiled simulator), so the per-episode steps, distance, return and end equal
     :func:`run_episodes`' for a controller that gives the same torques batched as alone. It
     costs about one episode's wall time instead of one per seed; it records the steps' times
-    and hip positions, the first step's length (not the torque cost), and the cost of
-    transport: the positive and negative joint work
-    sum(|tau q-dot|) dt (the torques of each period, the rates at its end) per weight and
-    distance [1] (``cost_of_transport``; NaN for an episode that did not move forward).
+    and hip positions, the first step's length (not the torque cost), and the energy of
+    :func:`energy`.
     """
     import gymnasium as gym
 
@@ -146,15 +164,14 @@ def run_episodes_batched(
     )
     obs, info = venv.reset(seed=[int(s) for s in seeds])
     y0 = info["hip_y"].copy()
-    t_prev = info["t"].copy()
     ret = np.zeros(len(seeds))
-    work = np.zeros(len(seeds))
     live = np.ones(len(seeds), bool)
     final = {}
     steps = np.zeros(len(seeds), np.int64)
     pushes: list[list[float]] = [[] for _ in seeds]
     step_t: list[list[float]] = [[] for _ in seeds]
     step_hip: list[list[float]] = [[] for _ in seeds]
+    step_work: list[list[float]] = [[] for _ in seeds]
     first_m = np.full(len(seeds), math.nan)
     bar = _period_bar(venv, progress)
     while live.any():
@@ -163,10 +180,6 @@ def run_episodes_batched(
         tau = np.asarray(act(obs), dtype=np.float64)
         tau[~live] = 0.0  # finished episodes autoreset on this step; their action is ignored
         obs, r, term, trunc, info = venv.step(tau)
-        applied = info.get("torque", tau)  # PD actions: the period's mean torque
-        power = np.abs(applied * obs[:, JOINT_RATES]).sum(axis=1)
-        work[live] += (power * (info["t"] - t_prev))[live]
-        t_prev = info["t"].copy()
         ret[live] += r[live]
         if "push_dv_m_s" in info:
             for i in np.flatnonzero(live & (info["push_dv_m_s"] != 0.0)):
@@ -177,17 +190,18 @@ def run_episodes_batched(
             steps[i] = info["steps_completed"][i]
             step_t[i].append(float(info["t"][i]))
             step_hip[i].append(float(info["hip_y"][i] - y0[i]))
+            step_work[i].append(float(info["motor_work_pos_j"][i]))
         for i in np.flatnonzero(live & (term | trunc)):
             live[i] = False
-            final[i] = {k: info[k][i] for k in ("steps_completed", "hip_y", "t")}
+            final[i] = {k: info[k][i] for k in ("steps_completed", "hip_y", "t") + ENERGY_KEYS}
             final[i]["end"] = info["termination_reason"][i] or "time_limit"
     if bar is not None:
         bar.close()
     params = venv.unwrapped.params
     venv.close()
     weight = params.total_mass_kg * params.gravity_mps2
-    return [_batched_episode(int(seed), final[i], float(y0[i]), float(ret[i]), work[i] / weight,
-                             step_t[i], step_hip[i], pushes[i], first_m[i])
+    return [_batched_episode(int(seed), final[i], float(y0[i]), float(ret[i]), weight,
+                             step_t[i], step_hip[i], step_work[i], pushes[i], first_m[i])
             for i, seed in enumerate(seeds)]  # fmt: skip
 
 
@@ -206,7 +220,7 @@ def _period_bar(venv, desc: str | None):
     return tqdm(total=total, desc=desc[:40], unit=" periods", mininterval=1.0, leave=False)
 
 
-def _batched_episode(seed, f, y0, ret, work_per_weight, step_t, step_hip, pushes,
+def _batched_episode(seed, f, y0, ret, weight, step_t, step_hip, step_work, pushes,
                      first_m=math.nan) -> dict:  # fmt: skip
     """One episode's record of :func:`run_episodes_batched` (``f``: its last info)."""
     dist = float(f["hip_y"] - y0)
@@ -218,9 +232,10 @@ def _batched_episode(seed, f, y0, ret, work_per_weight, step_t, step_hip, pushes
         "return": ret,
         "t_s": float(f["t"]),
         "end": f["end"],
-        "cost_of_transport": float(work_per_weight / dist) if dist > 0 else math.nan,
+        **energy(f, weight, dist),
         "step_t_s": step_t,
         "step_hip_y_m": step_hip,
+        "step_work_pos_j": step_work,
         "first_step_m": None if math.isnan(first_m) else float(first_m),
         "push_dv_m_s": pushes,  # the hip's velocity change of each push
     }
@@ -262,6 +277,10 @@ def initiation(eps: list[dict], min_steps: int = 1) -> dict:
     }
 
 
+def _nanmean(x) -> float:
+    return float(np.nanmean(x)) if np.isfinite(x).any() else math.nan
+
+
 def _mean(x) -> float:
     return float(np.mean(x)) if len(x) else float("nan")
 
@@ -273,6 +292,8 @@ def summarize(label: str, eps: list[dict]) -> dict:
     v = np.array([e["speed_m_s"] for e in eps])
     c = np.array([e.get("torque_cost", math.nan) for e in eps])
     cot = np.array([e.get("cost_of_transport", math.nan) for e in eps])
+    cot_abs = np.array([e.get("cost_of_transport_abs", math.nan) for e in eps])
+    share = np.array([e.get("damping_share", math.nan) for e in eps])
     return {
         "controller": label,
         "episodes": eps,
@@ -283,7 +304,9 @@ def summarize(label: str, eps: list[dict]) -> dict:
         "distance_std_m": d.std(),
         "speed_mean_m_s": v.mean(),
         "torque_cost_mean": float(np.nanmean(c)) if np.isfinite(c).any() else float("nan"),
-        "cost_of_transport_mean": float(np.nanmean(cot)) if np.isfinite(cot).any() else math.nan,
+        "cost_of_transport_mean": _nanmean(cot),
+        "cost_of_transport_abs_mean": _nanmean(cot_abs),
+        "damping_share_mean": _nanmean(share),
         "success": success([e["steps_completed"] for e in eps]),
         "ends": dict(Counter(e["end"] for e in eps)),
     }

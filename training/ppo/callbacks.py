@@ -147,8 +147,11 @@ def selection_score(row: dict, select_by: str) -> float:
     """The score of which ``best/`` keeps the highest.
 
     The mean steps (distance breaks ties), or with ``select_by="min"`` the fewest steps of the
-    episodes first.
+    episodes first, or with ``select_by="return"`` the mean return (a task whose reward is
+    the measure: following a command, standing at zero).
     """
+    if select_by == "return":
+        return float(row["return_mean"])
     score = float(row["steps_mean"] + 1e-3 * row["distance_mean_m"])
     return float(row["steps_min"] + 1e-3 * score) if select_by == "min" else score
 

@@ -63,7 +63,7 @@ class PPOConfig:
     eval_freq: int = 100_000  # env steps between evaluations (they select best/)
     eval_episodes: int = 10  # episodes per evaluation, on the selection seeds (all at once,
     # in the batched env)
-    select_by: str = "mean"  # best/ is the evaluation with the most steps: "mean" or "min"
+    select_by: str = "mean"  # best/: the most steps ("mean", "min") or the mean return
     # (the fewest steps of its episodes first, then the mean)
     stop_min_steps: int = 0  # > 0: the run stops by itself once every selection episode
     # completed at least this many steps in stop_evals consecutive evaluations (its own
@@ -284,7 +284,7 @@ def _choices() -> dict[str, tuple]:
         "env_id": (ENV_ID,),  # the registered id only: "module:Id" would import module
         "vec": ("batched", "subproc", "dummy"),
         "lr_schedule": ("constant", "linear"),
-        "select_by": ("mean", "min"),
+        "select_by": ("mean", "min", "return"),
         "activation": ACTIVATIONS,
     }
 
