@@ -226,8 +226,13 @@ class EnvCore:
         return terminated
 
     def _held_too_long(self, terminated: np.ndarray, skip) -> None:
-        """Early termination (``max_model_time_s``): a contact phase held too long."""
+        """Early termination (``max_model_time_s``): a contact phase held too long.
+
+        With a command, only while it is not zero (standing holds a contact phase).
+        """
         held = self.clock.model_time_s() > self.settings.max_model_time_s + 1e-9
+        if self.commands is not None:
+            held &= self.commands.v != 0.0
         if skip is not None:
             held[skip] = False
         terminated |= held

@@ -8,6 +8,7 @@ import biped_constraint_env  # noqa: F401
 from biped_constraint_env.command import CommandReward, Commands, CommandSettings
 from biped_constraint_env.settings import make_settings
 
+REST = [0.0, -0.1, 0.1, -0.3, -0.4, 0.7]
 KW = {"task": "command", "command": {"range": (0.0, 2.0), "zero_fraction": 0.2,
                                      "resample_s": (0.1, 0.3)}}  # fmt: skip
 
@@ -86,3 +87,18 @@ def test_command_reward_follows_the_command_and_pays_standing_at_zero():
     out = r.terms(np.array([0.0, 2.0]), np.zeros(2), **dict(moving, steps=np.ones(2)))
     assert out[:, 4].tolist() == [0.0, 10.0]  # steps pay nothing at a zero command
     assert np.allclose(out[:, 5], out[:, :5].sum(axis=1))
+
+
+def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
+    kw = {**KW, "max_model_time_s": 0.1}
+    ended = {}
+    for c in (0.0, 1.0):
+        env = gym.make("ConstrainedBiped-v0", **kw)
+        env.reset(seed=0, options={"command": c, "q": REST})
+        *_, term, _, info = env.step(np.zeros(5))
+        for _ in range(6):  # 0.14 s: past the limit, still in model 1
+            if term:
+                break
+            *_, term, _, info = env.step(np.zeros(5))
+        ended[c] = info["termination_reason"]
+    assert ended == {0.0: None, 1.0: "model_time"}

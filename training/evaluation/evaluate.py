@@ -383,6 +383,19 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
         actor = controller_from(args.controller)
         batch = controller_batch(args.controller, len(seeds))
     label = f"{loop['label']} ({start} start)"
+    protocol = None
+    if cfg.env_kwargs().get("task") == "command":  # the command task's own protocol first
+        from training.evaluation import command_protocol
+
+        print("the command task's protocol: start, tracking, stop and restart, sequences",
+              flush=True)  # fmt: skip
+        protocol = command_protocol.run_protocol(batch, cfg.env_kwargs(), seeds, cfg.env_id)
+        if args.robustness:  # the push table (size x direction x phase) and slopes
+            pushes = command_protocol.push_rows(batch, cfg.env_kwargs(), seeds, cfg.env_id)
+            command_protocol.push_figure(pushes, out_dir / "figures" / "pushes.png")
+            protocol += pushes + command_protocol.slope_rows(batch, cfg.env_kwargs(), seeds,
+                                                             cfg.env_id)  # fmt: skip
+        print("\n" + command_protocol.markdown(protocol), flush=True)
     print(TABLE_HEADER, flush=True)
     main_row = batched_row(label, batch, cfg.env_kwargs(), seeds, cfg.env_id, start == "rest")
     rows = [main_row]
@@ -407,6 +420,8 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
         "seeds": seeds,
         "results": rows,
     }
+    if protocol is not None:
+        summary["command_protocol"] = protocol
     write_file(out_dir / "evaluation.json", json_text(summary))
     print(
         f"\n{args.episodes} seeded episodes (seeds {seeds[0]}-{seeds[-1]}), "

@@ -89,6 +89,9 @@ class PPOConfig:
     # log_std_init; the stance ankle tolerates far less noise than the hip)
     action_std_nm: float = 0.0  # > 0: initial action std [N m] on every joint (overrides
     # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
+    action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
+    # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
+    # a random network whose first actions pass the mid-stride start)
     critic_warmup: int = 0  # rollouts at the start of PPO in which only the critic learns
     bc_anchor_steps: int = 0  # behaviour-cloning steps on the imitation data after each PPO
     # update (kickstarting; 0 = off)
@@ -113,6 +116,7 @@ class PPOConfig:
         for name, sizes in (
             ("gear", (1, 5)),
             ("log_std_joints", (0, 5)),
+            ("action_bias_nm", (0, 5)),
             ("net_arch", tuple(range(1, 9))),
         ):
             if len(getattr(self, name)) not in sizes:
@@ -268,6 +272,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("bc_rounds", 0, 10_000), ("bc_episodes", 0, 1_000_000), ("bc_periods0", 1, 1_000_000),
     ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
     ("bc_ankle_weight", 0.0, 1e6), ("log_std_joints", -20.0, 5.0), ("action_std_nm", 0.0, 150.0),
+    ("action_bias_nm", -150.0, 150.0),
     ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
     ("stop_min_steps", 0, 100_000), ("stop_evals", 1, 1000),
 )  # fmt: skip

@@ -217,6 +217,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         if cfg.action_std_nm > 0:
             gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
             model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
+        if cfg.action_bias_nm:  # the initial action mean's bias, in action units
+            gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
+            bias = torch.as_tensor(cfg.action_bias_nm, dtype=torch.float32)
+            model.policy.action_net.bias.data[:] = bias / gear
         if cfg.teacher and not available(run.path, "imitation"):  # the imitation result alone
             arrays = {"demos.npz": {"obs": demos.obs, "act": demos.act}}
             save_snapshot(fs / "imitation", model.policy, {"num_timesteps": 0}, vecnorm,

@@ -1,0 +1,347 @@
+"""The command task's protocol: start, tracking, stop and restart, random sequences, pushes, slopes.
+
+Every row runs its episodes at once in the batched env (``policy_batch_actor``), the
+commands set between control periods with ``set_command`` as a joystick would (each row's
+command a function of its time), on the report seeds, with the default strict physics:
+
+* **start**: from the paper's rest posture, commanded ``START_COMMAND_M_S``: a success is an
+  episode of at least 20 complete steps in its 30 s (the walking success);
+* **tracking**: a constant command per row of ``TRACK_COMMANDS_M_S``: the mean over episodes of
+  |stride speed - command| (a stride: two steps; strides that end after ``SETTLE_S``), and the
+  episodes that ran 30 s;
+* **stop**: walk at a command drawn in [0.3, 2.0] m/s for ``STOP_AT_S``, then 0: a success
+  stands (hip speed < ``STAND_SPEED_M_S``, the period's mean) within ``STOP_WITHIN_S`` and
+  holds it for ``HOLD_S`` with a mean drift below the same speed; then the command is 1.0 m/s
+  again: **restart**, a success takes at least ``RESTART_STEPS`` steps in the next 10 s with
+  no termination;
+* **sequence**: a new command uniform in [0, 2] m/s every U(2, 5) s over 30 s: a success is no
+  termination;
+* with ``--robustness``, **pushes** (an OSU-style table: hip Δv of ``PUSH_DV_M_S`` forward and
+  backward, at ``PUSH_PHASES`` bins of the gait phase, commanded 1.0 m/s: a success is no
+  termination in the 10 s after the push) and **slopes** (``SLOPES_DEG`` at 1.0 m/s: the
+  walking success).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from training.evaluation.stats import MIN_STEPS, success
+
+START_COMMAND_M_S = 1.0
+TRACK_COMMANDS_M_S = (0.3, 0.6, 1.0, 1.5, 2.0)
+SETTLE_S = 3.0
+"""Tracking is measured on strides that end after this time [s]."""
+STOP_AT_S = 5.0
+STOP_WITHIN_S = 3.0
+HOLD_S = 5.0
+STAND_SPEED_M_S = 0.05
+RESTART_STEPS = 4
+SEQUENCE_S = 30.0
+PUSH_DV_M_S = (0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
+PUSH_PHASES = 10
+SLOPES_DEG = (-5.0, -2.5, 0.0, 2.5, 5.0)
+
+
+def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable, episode_s,
+                  env_id: str = "ConstrainedBiped-v0",
+                  hook: Callable | None = None) -> list[dict]:  # fmt: skip
+    """Episodes of ``seeds`` under ``command(t (n,), k) -> (n,)`` [m/s], set before every period.
+
+    Per episode: its steps, end, the hip's y and the time at every period, the step times, and
+    the commands it ran under (lists, for the rows' measures). ``hook(core, live, step_t)``
+    runs before every period (a push: it may change the rows' rates).
+    """
+    import gymnasium as gym
+
+    import biped_constraint_env  # noqa: F401
+
+    kw = {**env_kwargs, "time_limit_s": episode_s}
+    venv = gym.make_vec(env_id, num_envs=len(seeds), vectorization_mode="vector_entry_point",
+                        **kw)  # fmt: skip
+    obs, info = venv.reset(seed=[int(s) for s in seeds])
+    n = len(seeds)
+    live = np.ones(n, bool)
+    hip = [[float(info["hip_y"][i])] for i in range(n)]
+    ts = [[float(info["t"][i])] for i in range(n)]
+    cmds: list[list[float]] = [[] for _ in range(n)]
+    step_t: list[list[float]] = [[] for _ in range(n)]
+    steps = np.zeros(n, np.int64)
+    ends = [None] * n
+    k = 0
+    while live.any():
+        v = np.asarray(command(info["t"], k), dtype=float)
+        venv.unwrapped.set_command(v)
+        if hook is not None:
+            hook(venv.unwrapped.core, live, step_t)
+        obs = obs.copy()
+        obs[:, -1] = v  # the command's entry (the observation's last) as the env now gives it
+        tau = np.asarray(act(obs), dtype=np.float64)
+        tau[~live] = 0.0
+        obs, _, term, trunc, info = venv.step(tau)
+        k += 1
+        for i in np.flatnonzero(live):
+            hip[i].append(float(info["hip_y"][i]))
+            ts[i].append(float(info["t"][i]))
+            cmds[i].append(float(v[i]))
+            if info["steps_completed"][i] > steps[i]:
+                steps[i] = info["steps_completed"][i]
+                step_t[i].append(float(info["t"][i]))
+            if term[i] or trunc[i]:
+                live[i] = False
+                ends[i] = info["termination_reason"][i] or "time_limit"
+    venv.close()
+    return [{"seed": int(s), "steps_completed": int(steps[i]), "end": ends[i],
+             "hip_y": hip[i], "t": ts[i], "command": cmds[i], "step_t_s": step_t[i]}
+            for i, s in enumerate(seeds)]  # fmt: skip
+
+
+def _speed_at(ep: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(t at each period's end, the period's mean hip speed [m/s])."""
+    t, y = np.asarray(ep["t"]), np.asarray(ep["hip_y"])
+    return t[1:], np.diff(y) / np.maximum(np.diff(t), 1e-12)
+
+
+def stride_errors(ep: dict, command: float, settle_s: float = SETTLE_S) -> list[float]:
+    """|stride speed - command| [m/s] of the strides (two steps) that end after ``settle_s``."""
+    t, y = np.asarray(ep["t"]), np.asarray(ep["hip_y"])
+    marks = ep["step_t_s"][::2]
+    out = []
+    for a, b in zip(marks, marks[1:], strict=False):
+        if b <= settle_s:
+            continue
+        ya, yb = np.interp(a, t, y), np.interp(b, t, y)
+        out.append(abs((yb - ya) / (b - a) - command))
+    return out
+
+
+def start_row(act, env_kwargs, seeds, env_id) -> dict:
+    """From rest at 1.0 m/s: the walking success."""
+    eps = run_commanded(act, {**env_kwargs, "start": "rest"}, seeds,
+                        lambda t, k: np.full(len(t), START_COMMAND_M_S), 30.0, env_id)  # fmt: skip
+    return {"row": "start from rest, 1.0 m/s", "success": success([e["steps_completed"]
+                                                                   for e in eps]),
+            "ends": _ends(eps)}  # fmt: skip
+
+
+def tracking_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
+    """Constant commands: the mean stride-speed error after SETTLE_S, per command."""
+    rows = []
+    for c in TRACK_COMMANDS_M_S:
+        eps = run_commanded(act, env_kwargs, seeds, lambda t, k, c=c: np.full(len(t), c), 30.0,
+                            env_id)  # fmt: skip
+        errs = [np.mean(e) for e in (stride_errors(ep, c) for ep in eps) if e]
+        full = sum(ep["end"] == "time_limit" for ep in eps)
+        rows.append({"row": f"track {c} m/s", "command_m_s": c,
+                     "mean_abs_error_m_s": float(np.mean(errs)) if errs else math.nan,
+                     "episodes_measured": len(errs), "ran_30s": full, "episodes": len(eps),
+                     "ends": _ends(eps)})  # fmt: skip
+    return rows
+
+
+def stop_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
+    """Walk, stop (command 0), stand, restart at 1.0 m/s."""
+    rng = np.random.default_rng(int(seeds[0]))
+    walk = rng.uniform(0.3, 2.0, len(seeds))
+    restart_at = STOP_AT_S + STOP_WITHIN_S + HOLD_S
+
+    def command(t, k):
+        return np.where(t < STOP_AT_S, walk, np.where(t < restart_at, 0.0, START_COMMAND_M_S))
+
+    eps = run_commanded(act, env_kwargs, seeds, command, restart_at + 10.0, env_id)
+    stood, restarted, drifts = [], [], []
+    for ep in eps:
+        t, v = _speed_at(ep)
+        ok = ep["t"][-1] >= restart_at - 1e-9
+        calm = (t > STOP_AT_S) & (t <= STOP_AT_S + STOP_WITHIN_S) & (np.abs(v) < STAND_SPEED_M_S)
+        first = t[calm].min() if ok and calm.any() else math.inf
+        hold = (t > first) & (t <= first + HOLD_S)
+        drift = float(np.abs(v[hold]).mean()) if hold.any() else math.inf
+        stand = (
+            ok
+            and math.isfinite(first)
+            and first + HOLD_S <= restart_at + 1e-9
+            and bool(np.all(np.abs(v[hold]) < 2 * STAND_SPEED_M_S))
+            and drift < STAND_SPEED_M_S
+        )
+        stood.append(stand)
+        drifts.append(drift)
+        after = [s for s in ep["step_t_s"] if s > restart_at]
+        restarted.append(stand and ep["end"] == "time_limit" and len(after) >= RESTART_STEPS)
+    n = len(eps)
+    return [
+        {"row": "stop: at rest within 3 s, held 5 s", "success": _rate(sum(stood), n),
+         "drift_m_s_mean": float(np.mean([d for d in drifts if math.isfinite(d)] or [math.nan])),
+         "ends": _ends(eps)},
+        {"row": "restart to 1.0 m/s from that rest", "success": _rate(sum(restarted), n)},
+    ]  # fmt: skip
+
+
+def sequence_row(act, env_kwargs, seeds, env_id) -> dict:
+    """Random command sequences over 30 s: no termination."""
+    rng = np.random.default_rng(int(seeds[0]) + 1)
+    changes = [np.cumsum(rng.uniform(2.0, 5.0, 16)) for _ in seeds]
+    values = rng.uniform(0.0, 2.0, (len(seeds), 17))
+
+    def command(t, k):
+        idx = np.array(
+            [np.searchsorted(c, ti, side="right") for c, ti in zip(changes, t, strict=True)]
+        )
+        return values[np.arange(len(t)), idx]
+
+    eps = run_commanded(act, env_kwargs, seeds, command, SEQUENCE_S, env_id)
+    ok = sum(ep["end"] == "time_limit" for ep in eps)
+    return {"row": "random command sequences, 30 s", "success": _rate(ok, len(eps)),
+            "ends": _ends(eps)}  # fmt: skip
+
+
+PUSH_SETTLE_S = 4.0
+"""Pushes come at the first step phase reached after this time [s] (a settled gait)."""
+PUSH_AFTER_S = 10.0
+"""A pushed episode succeeds when it runs this long after its push [s]."""
+
+
+class PhasePush:
+    """Each row's hip push of ``dv`` [m/s] at its gait phase ``phase`` (in [0, 1) of a step).
+
+    The phase of a step: the time since the last step completed over the last step's
+    duration. The impulse is scaled so that the hip's forward velocity changes by ``dv`` with
+    the current model's contacts held (:func:`~biped_constraint_env.perturbations.hip_impulse`,
+    linear in the impulse).
+    """
+
+    def __init__(self, dv: np.ndarray, phase: np.ndarray):
+        """Pushes of ``dv`` (n,) [m/s] (signed: > 0 forward) at ``phase`` (n,)."""
+        self.dv, self.phase = dv, phase
+        self.at = np.full(len(dv), math.inf)
+        self.done = np.zeros(len(dv), bool)
+
+    def __call__(self, core, live, step_t) -> None:
+        """Push the rows whose phase has come (before the period)."""
+        from biped_constraint_env.kinematics import nb_point_jacobian
+        from biped_constraint_env.perturbations import HIP_LINK, hip_impulse
+        from biped_constraint_env.state import FS_T, ST_MODE, ST_SIDE
+
+        sim = core.sim
+        for i in np.flatnonzero(live & ~self.done):
+            t = sim.fst[i, FS_T]
+            st = [s for s in step_t[i] if s > PUSH_SETTLE_S]
+            if len(st) < 2:
+                continue
+            phase = (t - st[-1]) / (st[-1] - st[-2])
+            if phase < self.phase[i]:
+                continue
+            params = core.perturb.params[i]
+            mode, side = int(sim.ist[i, ST_MODE]), int(sim.ist[i, ST_SIDE])
+            q = sim.q[i].copy()
+            dq = hip_impulse(params, mode, side, q, (1.0, 0.0))  # per N s
+            jac = nb_point_jacobian(params.chain(side).packed, q, HIP_LINK, 0.0)
+            sim.qd[i] += (self.dv[i] / float(jac[0] @ dq)) * dq
+            self.done[i] = True
+            self.at[i] = t
+
+
+def push_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
+    """The push table: every size and direction at PUSH_PHASES phases, commanded 1.0 m/s.
+
+    ``seeds`` are spread over the phases (seed k at phase bin k mod PUSH_PHASES); a success
+    runs PUSH_AFTER_S after its push with no termination (an episode never pushed fails).
+    """
+    rows = []
+    n = len(seeds)
+    phase = (np.arange(n) % PUSH_PHASES) / PUSH_PHASES
+    for sign, name in ((1.0, "forward"), (-1.0, "backward")):
+        for dv in PUSH_DV_M_S:
+            push = PhasePush(np.full(n, sign * dv), phase)
+            eps = run_commanded(act, env_kwargs, seeds,
+                                lambda t, k: np.full(len(t), START_COMMAND_M_S),
+                                PUSH_SETTLE_S + 4.0 + PUSH_AFTER_S, env_id, hook=push)  # fmt: skip
+            ok = [push.done[i] and (ep["end"] == "time_limit"
+                                    or ep["t"][-1] >= push.at[i] + PUSH_AFTER_S)
+                  for i, ep in enumerate(eps)]  # fmt: skip
+            bins = np.arange(n) % PUSH_PHASES
+            by_phase = [float(np.mean(np.asarray(ok)[bins == k])) for k in range(PUSH_PHASES)]
+            rows.append({"row": f"push {name} {dv} m/s", "direction": name, "dv_m_s": dv,
+                         "success": _rate(sum(ok), n), "by_phase": by_phase,
+                         "ends": _ends(eps)})  # fmt: skip
+    return rows
+
+
+def slope_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
+    """Slopes at 1.0 m/s: the walking success on each."""
+    rows = []
+    for deg in SLOPES_DEG:
+        kw = {**env_kwargs, "perturbations": {**(env_kwargs.get("perturbations") or {}),
+                                              "slope_rad": math.radians(deg)}}  # fmt: skip
+        eps = run_commanded(act, kw, seeds, lambda t, k: np.full(len(t), START_COMMAND_M_S),
+                            30.0, env_id)  # fmt: skip
+        rows.append({"row": f"slope {deg:+.1f} deg, 1.0 m/s",
+                     "success": success([e["steps_completed"] for e in eps]),
+                     "ends": _ends(eps)})  # fmt: skip
+    return rows
+
+
+def push_figure(rows: list[dict], path) -> None:
+    """Success against push size, one line per phase bin, forward and backward."""
+    from training.plumbing.outputs import save_figure
+    from training.plumbing.plots import _mpl
+
+    plt = _mpl()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
+    for ax, name in zip(axes, ("forward", "backward"), strict=True):
+        mine = [r for r in rows if r.get("direction") == name]
+        x = [r["dv_m_s"] for r in mine]
+        cmap = plt.get_cmap("viridis")
+        for k in range(PUSH_PHASES):
+            ax.plot(x, [100 * r["by_phase"][k] for r in mine], "-", color=cmap(k / PUSH_PHASES),
+                    lw=1, alpha=0.8, label=f"phase {k / PUSH_PHASES:.1f}")  # fmt: skip
+        ax.plot(x, [100 * r["success"]["rate"] for r in mine], "k-o", lw=2, label="all phases")
+        ax.set_title(f"{name} hip push at 1.0 m/s", fontsize=9)
+        ax.set_xlabel("hip velocity change [m/s]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("episodes that run 10 s on [%]")
+    axes[1].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def _rate(k: int, n: int) -> dict:
+    from training.evaluation.stats import wilson_interval
+
+    lo, hi = wilson_interval(k, n)
+    return {"successes": k, "episodes": n, "rate": k / n, "ci95": (lo, hi), "min_steps": MIN_STEPS}
+
+
+def _ends(eps) -> dict:
+    from collections import Counter
+
+    return dict(Counter(ep["end"] for ep in eps))
+
+
+def run_protocol(act, env_kwargs: dict, seeds: Sequence[int], env_id: str) -> list[dict]:
+    """The protocol's rows (the module docstring), in order."""
+    return [start_row(act, env_kwargs, seeds, env_id),
+            *tracking_rows(act, env_kwargs, seeds, env_id),
+            *stop_rows(act, env_kwargs, seeds, env_id),
+            sequence_row(act, env_kwargs, seeds, env_id)]  # fmt: skip
+
+
+def markdown(rows: list[dict]) -> str:
+    """The rows as a markdown table."""
+    from training.evaluation.stats import format_success
+
+    out = ["| row | result | ends |", "|---|---|---|"]
+    for r in rows:
+        if "success" in r:
+            res = format_success(r["success"])
+            if "drift_m_s_mean" in r:
+                res += f"; drift {r['drift_m_s_mean']:.3f} m/s"
+        else:
+            res = (f"mean abs(stride speed - command) {r['mean_abs_error_m_s']:.3f} m/s "
+                   f"({r['episodes_measured']} episodes with strides after 3 s; "
+                   f"{r['ran_30s']}/{r['episodes']} ran 30 s)")  # fmt: skip
+        out.append(f"| {r['row']} | {res} | {r.get('ends', '')} |")
+    return "\n".join(out) + "\n"
