@@ -102,3 +102,24 @@ def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
             *_, term, _, info = env.step(np.zeros(5))
         ended[c] = info["termination_reason"]
     assert ended == {0.0: None, 1.0: "model_time"}
+
+
+def test_protocol_measures_stride_speed_and_sets_commands_between_periods():
+    from training.evaluation import command_protocol as cp
+
+    # a synthetic walk at 1.2 m/s with a step every 0.4 s: stride speed error 0.2 at 1.0 m/s
+    t = np.arange(0, 10.0, 0.02)
+    ep = {"t": list(t), "hip_y": list(1.2 * t), "step_t_s": list(np.arange(0.4, 10.0, 0.4))}
+    errs = cp.stride_errors(ep, 1.0)
+    assert errs and np.allclose(errs, 0.2)
+    seen = []
+
+    def act(obs):
+        seen.append(obs[:, -1].copy())  # the command entry the network sees
+        return np.zeros((len(obs), 5))
+
+    eps = cp.run_commanded(act, {"task": "command"}, [0, 1],
+                           lambda tt, k: np.where(tt < 0.1, 0.5, 1.5), 0.3)  # fmt: skip
+    assert seen[0].tolist() == [0.5, 0.5] and all(e["command"][0] == 0.5 for e in eps)
+    assert any(s.tolist() == [1.5, 1.5] for s in seen)  # changed when the time came
+    assert all(len(e["t"]) == len(e["hip_y"]) for e in eps)
