@@ -337,10 +337,12 @@ def markdown(rows: list[dict]) -> str:
     for r in rows:
         if "success" in r:
             res = format_success(r["success"])
-            if "drift_m_s_mean" in r:
+            if r.get("drift_m_s_mean") is not None:
                 res += f"; drift {r['drift_m_s_mean']:.3f} m/s"
         else:
-            res = (f"mean abs(stride speed - command) {r['mean_abs_error_m_s']:.3f} m/s "
+            err = r["mean_abs_error_m_s"]
+            err = math.nan if err is None else err
+            res = (f"mean abs(stride speed - command) {err:.3f} m/s "
                    f"({r['episodes_measured']} episodes with strides after 3 s; "
                    f"{r['ran_30s']}/{r['episodes']} ran 30 s)")  # fmt: skip
         out.append(f"| {r['row']} | {res} | {r.get('ends', '')} |")

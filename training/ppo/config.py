@@ -227,10 +227,11 @@ class PPOConfig:
         return what
 
     def obs_dim(self) -> int:
-        """The observation's length (24; + 2 phase entries)."""
+        """The observation's length (24; + 2 phase entries; + 1 command)."""
         from biped_constraint_env.observation import observation_space
 
-        return observation_space(self.settings().observation.phase_obs).shape[0]
+        s = self.settings()
+        return observation_space(s.observation.phase_obs, s.command is not None).shape[0]
 
     def policy_kwargs(self) -> dict:
         """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.

@@ -572,8 +572,8 @@ def build_policy(cfg, observation_space=None):
     from biped_constraint_env.observation import observation_space as env_obs_space
 
     if observation_space is None:
-        o = cfg.settings().observation
-        observation_space = env_obs_space(o.phase_obs)
+        s = cfg.settings()
+        observation_space = env_obs_space(s.observation.phase_obs, s.command is not None)
     act_space = spaces.Box(-1.0, 1.0, (5,), np.float32)
     return ActorCriticPolicy(
         observation_space, act_space, lambda _: 0.0, use_sde=cfg.use_sde, **cfg.policy_kwargs()

@@ -116,7 +116,9 @@ def publish(cfg: PPOConfig, run: OutDir, ended: str = "") -> None:
     """
     if available(run.path, "best"):
         st = load_state(open_snapshot(run.path, "best"))
-        by = "the fewest steps of" if cfg.select_by == "min" else "the mean steps over"
+        by = {"min": "the fewest steps of", "return": "the mean return over"}.get(
+            cfg.select_by, "the mean steps over"
+        )
         why = (
             f"the run's selection: the best score ({by} {cfg.eval_episodes} selection "
             f"episodes, seeds {SELECTION_SEED_OFFSET}+) at {st['num_timesteps']} env steps"
