@@ -181,3 +181,29 @@ def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
         kw = {**cfg.env_kwargs(), "start": start}
         (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id, episode_s=30)
         assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", (start, ep)
+
+
+def test_committed_command_policy_follows_a_command_from_rest_with_no_recorded_motion():
+    """policies/ppo_command_50hz: the network alone sets torques every 20 ms with the command in
+    its input, trained by PPO from a random network on the command task (no recorded motion in
+    its reward, starts or input). One held-out 30 s episode from rest at 1.0 m/s walks, near
+    the command."""
+    import torch
+
+    from biped_constraint_env.settings import make_settings
+    from training.evaluation.command_protocol import run_commanded, stride_errors
+    from training.ppo.policy_io import available, load_policy, policy_batch_actor
+
+    torch.set_num_threads(1)
+    path = POLICY.parent / "ppo_command_50hz"
+    policy, norm, cfg, _ = load_policy(path)
+    assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
+    run, train = cfg.settings(), make_settings(**cfg.train_env_kwargs())
+    for s in (run, train):
+        assert s.task == "command" and s.reward.kind == "command" and not s.needs_reference
+        assert s.action.kind == "torque" and s.command is not None and s.physics.options.strict
+    assert run.start.start == "rest"
+    (ep,) = run_commanded(policy_batch_actor(policy, norm, cfg), cfg.env_kwargs(), [500000],
+                          lambda t, k: np.full(len(t), 1.0), 30.0)  # fmt: skip
+    assert ep["end"] == "time_limit" and ep["steps_completed"] >= 20, ep["end"]
+    assert np.mean(stride_errors(ep, 1.0)) < 0.1

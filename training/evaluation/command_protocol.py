@@ -17,9 +17,9 @@ command a function of its time), on the report seeds, with the default strict ph
 * **sequence**: a new command uniform in [0, 2] m/s every U(2, 5) s over 30 s: a success is no
   termination;
 * with ``--robustness``, **pushes** (an OSU-style table: hip Δv of ``PUSH_DV_M_S`` forward and
-  backward, at ``PUSH_PHASES`` bins of the gait phase, commanded 1.0 m/s: a success is no
-  termination in the 10 s after the push) and **slopes** (``SLOPES_DEG`` at 1.0 m/s: the
-  walking success).
+  backward, each episode at its own phase of the gait, shown in ``PUSH_PHASES`` bins,
+  commanded 1.0 m/s: a success is no termination in the 10 s after the push) and
+  **slopes** (``SLOPES_DEG`` at 1.0 m/s: the walking success).
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from training.evaluation.rollouts import ENERGY_KEYS
+from training.evaluation.rollouts import energy as rollout_energy
 from training.evaluation.stats import MIN_STEPS, success
 
 START_COMMAND_M_S = 1.0
@@ -71,6 +73,7 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
     step_t: list[list[float]] = [[] for _ in range(n)]
     steps = np.zeros(n, np.int64)
     ends = [None] * n
+    energy: list[dict] = [{} for _ in range(n)]
     k = 0
     while live.any():
         v = np.asarray(command(info["t"], k), dtype=float)
@@ -93,9 +96,13 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
             if term[i] or trunc[i]:
                 live[i] = False
                 ends[i] = info["termination_reason"][i] or "time_limit"
+                energy[i] = {k: float(info[k][i]) for k in ENERGY_KEYS}
+    params = venv.unwrapped.params
+    weight = params.total_mass_kg * params.gravity_mps2
     venv.close()
     return [{"seed": int(s), "steps_completed": int(steps[i]), "end": ends[i],
-             "hip_y": hip[i], "t": ts[i], "command": cmds[i], "step_t_s": step_t[i]}
+             "hip_y": hip[i], "t": ts[i], "command": cmds[i], "step_t_s": step_t[i],
+             **rollout_energy(energy[i], weight, hip[i][-1] - hip[i][0])}
             for i, s in enumerate(seeds)]  # fmt: skip
 
 
@@ -135,7 +142,11 @@ def tracking_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
                             env_id)  # fmt: skip
         errs = [np.mean(e) for e in (stride_errors(ep, c) for ep in eps) if e]
         full = sum(ep["end"] == "time_limit" for ep in eps)
+        cot = [ep["cost_of_transport"] for ep in eps if np.isfinite(ep["cost_of_transport"])]
+        share = [ep["damping_share"] for ep in eps if np.isfinite(ep["damping_share"])]
         rows.append({"row": f"track {c} m/s", "command_m_s": c,
+                     "cost_of_transport_mean": float(np.mean(cot)) if cot else math.nan,
+                     "damping_share_mean": float(np.mean(share)) if share else math.nan,
                      "mean_abs_error_m_s": float(np.mean(errs)) if errs else math.nan,
                      "episodes_measured": len(errs), "ran_30s": full, "episodes": len(eps),
                      "ends": _ends(eps)})  # fmt: skip
@@ -247,12 +258,14 @@ class PhasePush:
 def push_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     """The push table: every size and direction at PUSH_PHASES phases, commanded 1.0 m/s.
 
-    ``seeds`` are spread over the phases (seed k at phase bin k mod PUSH_PHASES); a success
+    Episode k of n is pushed at the phase (k + 1/2) / n: the gait has settled into its cycle
+    by the push, so episodes pushed at one phase would repeat each other; n phases are n
+    conditions. ``by_phase``: the success in each of PUSH_PHASES bins of the phase. A success
     runs PUSH_AFTER_S after its push with no termination (an episode never pushed fails).
     """
     rows = []
     n = len(seeds)
-    phase = (np.arange(n) % PUSH_PHASES) / PUSH_PHASES
+    phase = (np.arange(n) + 0.5) / n
     for sign, name in ((1.0, "forward"), (-1.0, "backward")):
         for dv in PUSH_DV_M_S:
             push = PhasePush(np.full(n, sign * dv), phase)
@@ -262,7 +275,7 @@ def push_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
             ok = [push.done[i] and (ep["end"] == "time_limit"
                                     or ep["t"][-1] >= push.at[i] + PUSH_AFTER_S)
                   for i, ep in enumerate(eps)]  # fmt: skip
-            bins = np.arange(n) % PUSH_PHASES
+            bins = np.minimum((phase * PUSH_PHASES).astype(int), PUSH_PHASES - 1)
             by_phase = [float(np.mean(np.asarray(ok)[bins == k])) for k in range(PUSH_PHASES)]
             rows.append({"row": f"push {name} {dv} m/s", "direction": name, "dv_m_s": dv,
                          "success": _rate(sum(ok), n), "by_phase": by_phase,
@@ -342,8 +355,10 @@ def markdown(rows: list[dict]) -> str:
         else:
             err = r["mean_abs_error_m_s"]
             err = math.nan if err is None else err
+            cot = r.get("cost_of_transport_mean")
             res = (f"mean abs(stride speed - command) {err:.3f} m/s "
                    f"({r['episodes_measured']} episodes with strides after 3 s; "
-                   f"{r['ran_30s']}/{r['episodes']} ran 30 s)")  # fmt: skip
+                   f"{r['ran_30s']}/{r['episodes']} ran 30 s); cost of transport "
+                   f"{math.nan if cot is None else cot:.2f}")  # fmt: skip
         out.append(f"| {r['row']} | {res} | {r.get('ends', '')} |")
     return "\n".join(out) + "\n"

@@ -402,7 +402,8 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     if args.compare:
         rows += _rows_compare(args.run_dir, actor, batch, cfg, seeds, out_dir)
     if args.robustness:
-        rows += _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir)
+        rob = _robustness_rows(args, loop, batch, cfg, seeds, label, in_the_loop, out_dir)
+        rows += [{k: v for k, v in r.items() if k != "episodes"} for r in rob]  # summaries
     steps = np.array([e["steps_completed"] for e in main_row["episodes"]], dtype=float)
     dist = np.array([e["distance_m"] for e in main_row["episodes"]])
     order = np.argsort(steps + 1e-3 * dist)
