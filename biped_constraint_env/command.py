@@ -34,9 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from .gait import SWING_MODELS
-from .kinematics import nb_swing_ankle_vy
-from .rewards import REWARD_KINDS, RewardSettings
+from .gait import SWING_MODELS, GaitReward
+from .rewards import REWARD_KINDS
 from .validation import check_mapping, check_real
 
 MAX_COMMAND_M_S = 5.0
@@ -158,40 +157,23 @@ class Commands:
         return self.v[:, None]
 
 
-class CommandReward:
+class CommandReward(GaitReward):
     """The command reward of N rows (see the module docstring), after each period."""
 
-    def __init__(self, reward: RewardSettings, dt: float, n: int):
-        """For ``reward`` (kind "command"), control period ``dt`` [s] and ``n`` rows."""
-        if reward.kind != "command":
-            raise ValueError(f"CommandReward takes the 'command' reward, not {reward.kind!r}")
-        self.dt = float(dt)
-        self._w = {t: reward.weight(t) for t in COMMAND_TERMS}
-        self._k = {t: reward.kernel(t) for t in COMMAND_TERMS if t != "step"}
-        self._height = reward.target("height")
-        self._speed = reward.target("speed")  # the speed the cadence targets are made for
-        self._cadence = np.zeros(5)  # indexed by the model, 1-4
-        self._cadence[1:] = reward.target("cadence")
-        self._gated = reward.gated
-        self._swing_vy = np.zeros(n)
-
-    def swing_ankle_vy(self, chs, q, qd, ist) -> np.ndarray:
-        """(n,) the swing ankles' forward speeds [m/s] (a view, overwritten by the next call)."""
-        nb_swing_ankle_vy(chs, q, qd, ist, self._swing_vy)
-        return self._swing_vy
+    KIND = "command"
 
     def terms(self, command, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive):
         """(n, 6): the terms (COMMAND_TERMS order) and their sum, after a period."""
-        w, k = self._w, self._k
+        w, k, speed = self._w, self._k, self._target["speed"]
         out = np.empty((len(progress_m), len(COMMAND_TERMS) + 1))
         out[:, 0] = w["speed"] * np.exp(-k["speed"] * (progress_m / self.dt - command) ** 2)
-        out[:, 1] = w["height"] * np.exp(-k["height"] * (hip_z - self._height) ** 2)
+        out[:, 1] = w["height"] * np.exp(-k["height"] * (hip_z - self._target["height"]) ** 2)
         short = np.minimum(swing_vy - command, 0.0)
         free = np.isin(modes, SWING_MODELS)
         out[:, 2] = np.where(free, w["swing"] * np.exp(-k["swing"] * short**2), w["swing"])
         moving = command > 0.0
         stretch = np.where(
-            moving, np.minimum(MAX_STRETCH, self._speed / np.where(moving, command, 1.0)), 1.0
+            moving, np.minimum(MAX_STRETCH, speed / np.where(moving, command, 1.0)), 1.0
         )
         stretch = np.maximum(stretch, 1.0)
         over = np.maximum(model_time_s - self._cadence[modes] * stretch, 0.0)
@@ -200,6 +182,6 @@ class CommandReward:
         if self._gated:
             out[:, :3] *= on_time[:, None]
         out[~alive, :4] = 0.0
-        out[:, 4] = w["step"] * np.clip(command / self._speed, 0.0, 1.0) * steps
+        out[:, 4] = w["step"] * np.clip(command / speed, 0.0, 1.0) * steps
         out[:, 5] = out[:, :5].sum(axis=1)
         return out

@@ -36,16 +36,25 @@ GAIT_TERMS = tuple(t.name for t in REWARD_KINDS["gait"])
 
 
 class GaitReward:
-    """The gait reward of N rows: its weights, kernels and targets, and its terms per period."""
+    """The gait reward of N rows: its weights, kernels and targets, and its terms per period.
+
+    The command reward (:class:`~.command.CommandReward`) shares this state and differs in
+    :meth:`terms` only.
+    """
+
+    KIND = "gait"
 
     def __init__(self, reward: RewardSettings, dt: float, n: int):
-        """For ``reward`` (kind "gait"), control period ``dt`` [s] and ``n`` rows."""
-        if reward.kind != "gait":
-            raise ValueError(f"GaitReward takes the 'gait' reward, not {reward.kind!r}")
+        """For ``reward`` (kind :attr:`KIND`), control period ``dt`` [s] and ``n`` rows."""
+        if reward.kind != self.KIND:
+            raise ValueError(f"{type(self).__name__} takes the {self.KIND!r} reward, "
+                             f"not {reward.kind!r}")  # fmt: skip
+        names = reward.terms
         self.dt = float(dt)
-        self._w = {t: reward.weight(t) for t in GAIT_TERMS}
-        self._k = {t: reward.kernel(t) for t in GAIT_TERMS if t != "step"}
-        self._target = {t: reward.target(t) for t in GAIT_TERMS if t not in ("step", "cadence")}
+        self._w = {t: reward.weight(t) for t in names}
+        self._k = {t: reward.kernel(t) for t in names if t != "step"}
+        self._target = {t: reward.target(t) for t in names
+                        if t != "cadence" and reward.target(t) is not None}  # fmt: skip
         self._cadence = np.zeros(5)  # indexed by the model, 1-4
         self._cadence[1:] = reward.target("cadence")
         self._gated = reward.gated
