@@ -24,8 +24,8 @@ def cases() -> dict[str, dict]:
         "the default (5 ms periods, error-controlled steps, tolerance 2e-4)": {},
         f"control period {MIN_DT_S * 1e3:g} ms (the shortest)": {"dt": MIN_DT_S},
         f"RK4 steps of {MIN_STEP_S * 1e6:g} us (the shortest)": {
-            "integrator": "rk4", "substeps": round(0.005 / MIN_STEP_S)},
-        f"step_tol {MIN_STEP_TOL:g} (the smallest)": {"step_tol": MIN_STEP_TOL},
+            "physics": {"integrator": "rk4", "substeps": round(0.005 / MIN_STEP_S)}},
+        f"step_tol {MIN_STEP_TOL:g} (the smallest)": {"physics": {"step_tol": MIN_STEP_TOL}},
     }  # fmt: skip
 
 

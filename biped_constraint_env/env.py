@@ -47,11 +47,11 @@ class ConstrainedBipedEnv(gym.Env):
     ## Action Space
     ``Box(-torque_limit_nm, torque_limit_nm, (5,), float32)``, torques in N m, held over
     the control period ``dt``, in the *current* numbering (index 0 acts at the stance ankle).
-    With ``stop_at_switch=True`` a period ends early, just after a model switch (its impact
-    and, at 3 -> 4, the renumbering applied), so that the next action acts from the switch
-    itself: the paper changes the torque at the switch, and a torque held past the 3 -> 4
-    renumbering would otherwise act on other joints. ``info["t"]`` gives the time,
-    ``info["hip_y"]`` the hip's and ``info["root_y"]`` the stance toe's world y [m].
+    With ``physics={"stop_at_switch": True}`` (the walking task's) a period ends early, just
+    after a model switch (its impact and, at 3 -> 4, the renumbering applied), so that the next
+    action acts from the switch itself: the paper changes the torque at the switch, and a torque
+    held past the 3 -> 4 renumbering would otherwise act on other joints. ``info["t"]`` gives the
+    time, ``info["hip_y"]`` the hip's and ``info["root_y"]`` the stance toe's world y [m].
 
     | Num | joint | acts on (link i vs i-1)        | limit [N m] | sign |
     |-----|-------|--------------------------------|-------------|------|
@@ -61,8 +61,8 @@ class ConstrainedBipedEnv(gym.Env):
     | 3   | 4     | swing shank vs swing thigh     | 150         | same |
     | 4   | 5     | swing foot vs swing shank      | 150         | same |
 
-    Out-of-range torques are clipped (``out_of_range="clip"``, default) or refused with a
-    ``ValueError`` (``"raise"``). NaN, inf, a wrong shape or a non-numeric dtype raise
+    Out-of-range torques are clipped (``action={"out_of_range": "clip"}``, default) or refused
+    with a ``ValueError`` (``"raise"``). NaN, inf, a wrong shape or a non-numeric dtype raise
     ``ValueError``.
 
     ## Observation Space
@@ -81,7 +81,7 @@ class ConstrainedBipedEnv(gym.Env):
     | 22 | stance heel vertical force (F_L in models 1, 4; 0 in 2, 3) | -1e5 | 1e5 | N |
     | 23 | point-contact normal force f_n (models 3, 4; else 0) | -1e5 | 1e5 | N |
 
-    With ``phase_obs=True`` two entries follow (:mod:`.clock`): 24, the first-step flag (1
+    With ``observation=["phase"]`` two entries follow (:mod:`.clock`): 24, the first-step flag (1
     from a start at rest until its first step completes), and 25, the time in the current
     model [s] (counted in control periods, clipped to 2 s): ``Box((26,))``.
 
@@ -97,7 +97,8 @@ class ConstrainedBipedEnv(gym.Env):
     ``reward_switch = switch_bonus * (forward model switches in this period)``,
     ``reward_step = step_bonus * (walking steps completed in this period)`` and
     ``reward_ctrl = -ctrl_cost_weight * sum((tau / torque_limit_nm)^2)``. Defaults 1.0, 0.5,
-    1.0, 5.0, 0.1. There is no fall penalty (it makes agents timid); the small alive and switch
+    1.0, 5.0, 0.1; ``reward={"weights": {"forward", "alive", "switch", "step", "ctrl"}}``
+    sets them. There is no fall penalty (it makes agents timid); the small alive and switch
     bonuses reward staying inside the models and moving through the cycle, which the forward
     term alone does not (it pays for a lunge). ``info`` contains each term.
 
@@ -116,7 +117,7 @@ class ConstrainedBipedEnv(gym.Env):
     a training start spread over the step's swing with no recorded motion. A dict of weights
     mixes them, one uniform draw first picking the component (``{"stride": 0.75,
     "midstride": 0.25}``; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``). All add
-    uniform noise in ``[-reset_noise_scale, reset_noise_scale]`` (0.01 rad) to q1..q5; the
+    uniform noise in ``[-s, s]`` (``start={"reset_noise_scale": s}``, 0.01 rad) to q1..q5; the
     stance toe is at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
     starts from any state in the coordinates of docs/conventions.md (validated: points on or
     above the ground, model constraints satisfied; a ``ValueError`` names what is wrong).
@@ -127,70 +128,69 @@ class ConstrainedBipedEnv(gym.Env):
     ``stance_foot_tips_back``, ``stance_heel_down``, ``swing_toe_strike``,
     ``swing_foot_touchdown``, ``body_below_ground``, ``swing_heel_pulls``,
     ``stance_toe_pulls``, ``stance_foot_pulls`` (force events end the episode only with
-    ``strict=True``), ``step_behind_stance_toe``, ``zeno``, ``non_finite`` (the
-    numerical state blew up; the observation is the last finite state), and, only if
-    ``fall_hip_height_m`` is set, ``fall`` (the hip below that height [m] at the end of a
-    period; off by default), and, only if ``max_model_time_s`` is set, ``model_time`` (one
-    contact phase held longer than that [s], by the contact clock: an early termination for
-    learning, as legged-robot RL ends episodes on a bad posture). A fall is one of
-    these (a knee or the hip below the ground).
+    ``physics={"strict": True}``, the default), ``step_behind_stance_toe``, ``zeno``,
+    ``non_finite`` (the numerical state blew up; the observation is the last finite state),
+    and, only if ``termination["fall_hip_height_m"]`` is set, ``fall`` (the hip below that
+    height [m] at the end of a period; off by default), and, only if
+    ``termination["max_model_time_s"]`` is set, ``model_time`` (one contact phase held longer than
+    that [s], by the contact clock: an early termination for learning, as legged-robot RL ends
+    episodes on a bad posture). A fall is one of these (a knee or the hip below the ground).
     ### Truncation
-    By simulated time: ``time_limit_s`` (default 30 s; None: none), the first period that
-    ends at or after it (the single and the batched env alike, at any control period, whether
-    its periods end early at model switches or not). Gymnasium's ``max_episode_steps`` (a
+    By simulated time: ``termination["time_limit_s"]`` (default 30 s; None: none), the first
+    period that ends at or after it (the single and the batched env alike, at any control period,
+    whether its periods end early at model switches or not). Gymnasium's ``max_episode_steps`` (a
     limit in control periods) still applies when given.
 
     ## Arguments
-    Every argument is validated once, into ``env.settings`` (:mod:`.settings`: physics, task,
-    start, action, reward, observation, perturbations; printed by ``repr(env)``); a
-    ``ValueError`` names a wrong one. ``task`` sets the defaults of ``preset``, ``dt``,
-    ``stop_at_switch`` and ``start`` (:data:`~.tasks.TASKS`; ``"track"`` also the learning
-    settings below); each given explicitly overrides the task's value.
+    One keyword per part, each validated once into ``env.settings`` (:mod:`.settings`; printed
+    by ``repr(env)``, as data by ``env.settings.as_dict()``); a ``ValueError`` names a wrong
+    value, and an old flat keyword (``strict``, ``rsi``, ``phase_obs``...) is refused naming
+    its part. ``task`` sets the defaults of every part it names (:data:`~.tasks.TASKS`); a
+    part given explicitly overrides the task's (``physics`` and ``start`` dicts key by key,
+    ``action`` and ``reward`` dicts key by key onto the task's of the same kind).
 
-    | Parameter | Default (``task="walk"``) | ``task="paper"`` | Description (unit) |
-    |-----------|---------|---------|--------------------|
-    | task | "walk" | | "walk", "track" (learning from the reference walk), "command" (a |
-    | | | | commanded speed, :mod:`.command`) or "paper" |
-    | preset | "default" | "paper" | "default" (error-controlled RK4_LIMEX), "fixed_step" |
-    | | | | (RK4_LIMEX, 2.5 ms), "fast" (RK2, 5 ms), "paper" |
-    | dt | 0.005 | 0.02 | control period [s] |
-    | stop_at_switch | True | False | end a period just after a model switch |
-    | start | "midstride" | "rest" | start distribution (Starting State) |
-    | integrator, substeps, impact, locate_events, jdot, strict, | None | | override one |
-    | heel_force_includes_foot_weight, step_tol | | | (``SimOptions``); ``substeps`` per |
-    | | | | period (a preset keeps its longest step at any ``dt``) |
-    | params | paper_biped() | | the robot (``BipedParams``) |
-    | torque_limit_nm | 150 | | action bound [N m] |
-    | out_of_range | "clip" | | "clip" or "raise" |
-    | forward_reward_weight, alive_bonus, switch_bonus, | 1, 0.5, 1, | | the "env" reward's |
-    | step_bonus, ctrl_cost_weight | 5, 0.1 | | weights (Rewards) |
-    | reset_noise_scale | 0.01 | | uniform noise on q1..q5 [rad] |
-    | fall_hip_height_m | None | | end the episode when the hip is below [m] |
-    | max_model_time_s | None | | end the episode when one model has lasted longer [s] |
-    | posture | NOMINAL_POSTURE_RAD | | start posture of ``start="rest"`` [rad] |
-    | phase_obs | False | | append the contact clock's phase (below) to the observation |
-    | reward | "env" | | "env" (Rewards), "tracking" (a reference walk's; below), "gait" |
-    | | | | (the task and the contact clock, no recording; below) or {"kind", "weights", |
-    | | | | "kernels", "targets"}: any term's weight, kernel or target (:mod:`.rewards`) |
-    | reference | None | | the reference walk: "midstride", "rest", "own" (each start its |
-    | | | | own kind's recording) or an npz path (None: the start's own; "own" if mixed) |
-    | rsi | 0.0 | | fraction of resets at reference states (reference-state starts) |
-    | action | "torque" | | "torque", "pd" (PD targets in [-1, 1]^5, below) or a dict: |
-    | | | | {"kind": "pd", "around": "fixed" or "reference", "range": 1.0 [rad], |
-    | | | | "pose": Fig. 2 q1..q5 [rad], "offset": zeros [rad], "gain_scale": 1.0 |
-    | | | | (Kp x s, Kd x sqrt(s)), "dt": min(5 ms, dt), the PD law's physics step [s], |
-    | | | | dividing dt; = dt holds the PD torque} (one kwarg: only PD reads them) |
-    | perturbations | None | | dict: pushes, model error, slopes, sensor noise, action |
-    |  |  |  | delay (:mod:`.perturbations`; one kwarg for the group: nine options that |
-    |  |  |  | robustness studies set, validated together; ``slope_rad``: the ground's |
-    |  |  |  | slope [rad], a constant or drawn per episode from (lo, hi), gravity turned |
-    |  |  |  | by it in the ground's frame, where every position and speed is measured) |
-    | command | None | | dict: the commanded forward speed [m/s] (one more observation |
-    | | | | entry, ``info["command_m_s"]``): "range" (lo, hi), "zero_fraction", |
-    | | | | "resample_s" (lo, hi) or None (held); ``task="command"``: (0, 2), 0.1, |
-    | | | | (1, 5); ``set_command(v)``, ``reset(options={"command": v})``; needs |
-    | | | | ``reward="command"`` (:mod:`.command`) |
-    | render_mode | None | | "rgb_array" or "human" |
+    | Parameter | Default (``task="walk"``) | Description (unit) |
+    |-----------|---------|--------------------|
+    | task | "walk" | "walk", "track" (learning from the reference walk), "command" (a commanded |
+    | | | speed, :mod:`.command`) or "paper" (its preset, 20 ms, held torques, rest start) |
+    | preset | "default" | "default" (error-controlled RK4_LIMEX), "fixed_step" (RK4_LIMEX, |
+    | | | 2.5 ms), "fast" (RK2, 5 ms), "paper" |
+    | dt | 0.005 | control period [s] |
+    | params | paper_biped() | the robot (``BipedParams``) |
+    | physics | {"stop_at_switch": True} | ``SimOptions`` overrides of the preset: "integrator", |
+    | | | "substeps" (per period; a preset keeps its longest step at any ``dt``), "impact", |
+    | | | "locate_events", "jdot", "strict", "heel_force_includes_foot_weight", "step_tol", |
+    | | | "stop_at_switch" (end a period just after a model switch) |
+    | action | "torque" | "torque", "pd" (PD targets in [-1, 1]^5, below) or a dict: "kind", |
+    | | | "torque_limit_nm" (150: the torque bound [N m]), "out_of_range" ("clip" or |
+    | | | "raise"), and the PD mapping's "around" ("fixed" or "reference"), "range" (1.0 |
+    | | | [rad]), "pose" (Fig. 2 q1..q5 [rad]), "offset" (zeros [rad], or 4 x 5 per model), |
+    | | | "gain_scale" (1.0: Kp x s, Kd x sqrt(s)), "dt" (min(5 ms, dt): the PD law's physics |
+    | | | step [s], dividing dt; = dt holds the PD torque) |
+    | start | "midstride" | a start's name (Starting State), a dict of component weights, or |
+    | | | a dict: "kind" (either), "posture" (``NOMINAL_POSTURE_RAD``: the rest posture [rad]), |
+    | | | "reset_noise_scale" (0.01: noise on q1..q5 [rad]), "rsi" (0: the fraction of |
+    | | | resets at recorded reference states) |
+    | reward | "env" | "env" (Rewards), "tracking" (a reference walk's; below), "gait" (the task |
+    | | | and the contact clock, no recording; below), "command", or {"kind", "weights", |
+    | | | "kernels", "targets", "gated"}: any term's weight, kernel or target (:mod:`.rewards`) |
+    | termination | {} | dict: "fall_hip_height_m" (None: end when the hip is below [m]), |
+    | | | "max_model_time_s" (None: end when one model has lasted longer [s]), |
+    | | | "time_limit_s" (30: truncation by simulated time [s]; None: none) |
+    | observation | [] | blocks appended to the 24 entries: ["phase"] (the contact clock, below) |
+    | perturbations | None | dict: pushes, model error, slopes, sensor noise, action delay |
+    | | | (:mod:`.perturbations`; ``slope_rad``: the ground's slope [rad], a constant or drawn |
+    | | | per episode from (lo, hi), gravity turned by it in the ground's frame) |
+    | command | None | dict: the commanded forward speed [m/s] (one more observation entry, |
+    | | | ``info["command_m_s"]``): "range" (lo, hi), "zero_fraction", "resample_s" (lo, hi) |
+    | | | or None (held); ``task="command"``: (0, 2), 0.1, (1, 5); ``set_command(v)``, |
+    | | | ``reset(options={"command": v})``; needs ``reward="command"`` (:mod:`.command`) |
+    | reference | None | the reference walk: "midstride", "rest", "own" (each start its own kind's |
+    | | | recording) or an npz path (None: the start's own; "own" if mixed) |
+    | render_mode | None | "rgb_array" or "human" |
+
+    ``task="paper"`` differs in ``preset`` ("paper"), ``dt`` (0.02), ``physics``
+    ({"stop_at_switch": False}) and ``start`` ("rest").
 
     ## Learning
     The walking task's feasible set is thin: random or zero torques end an episode in its first
@@ -201,15 +201,15 @@ class ConstrainedBipedEnv(gym.Env):
     Options for learning from a reference walk (:mod:`.tracking`; the default env uses none):
     ``reward="tracking"`` is a DeepMimic-style sum of exponential kernels of the pose, rate, hip
     height and hip speed errors against the reference at the contact clock, plus 1 per
-    completed step (``info["reward_<term>"]``); ``rsi`` starts that fraction of the episodes at
-    recorded reference states; ``action="pd"`` makes the action five joint targets, tracked by
-    the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains ``PD_KP``, ``PD_KD``: the
-    targets hold over the control period and the law, clipped to the torque limit, is evaluated
-    at every physics step ``action["dt"]`` inside it, as legged-robot envs do (decimation; 20 ms
-    periods apply their targets through four 5 ms PD updates). ``info["torque"]`` gives the
-    period's time-mean torque; the control cost is the time mean of sum(tau^2).
-    The clock restarts at every model switch; a start follows its own reference's first step
-    (rest with "rest", mid-stride with "midstride").
+    completed step (``info["reward_<term>"]``); ``start={"rsi": f}`` starts the fraction f of
+    the episodes at recorded reference states; ``action="pd"`` makes the action five joint
+    targets, tracked by the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains
+    ``PD_KP``, ``PD_KD``: the targets hold over the control period and the law, clipped to the
+    torque limit, is evaluated at every physics step ``action["dt"]`` inside it, as legged-robot
+    envs do (decimation; 20 ms periods apply their targets through four 5 ms PD updates).
+    ``info["torque"]`` gives the period's time-mean torque; the control cost is the time mean of
+    sum(tau^2). The clock restarts at every model switch; a start follows its own reference's first
+    step (rest with "rest", mid-stride with "midstride").
 
     ``reward="gait"`` (:mod:`.gait`) needs no recorded motion: kernels of the period's hip speed
     against a commanded speed, of the hip height, of the swing ankle's forward speed while the
@@ -265,7 +265,14 @@ class ConstrainedBipedEnv(gym.Env):
       option and ``reward="command"``, no recorded motion). Added:
       ``info["motor_work_pos_j"]``, ``["motor_work_abs_j"]`` and ``["damping_loss_j"]``, the
       motors' positive and absolute work and the joint damping's loss since the episode's
-      start, summed at every physics step.
+      start, summed at every physics step. Changed: one keyword per part (13 and
+      ``render_mode``, from 33): the ``SimOptions`` overrides and ``stop_at_switch`` are the
+      ``physics`` dict; ``torque_limit_nm`` and ``out_of_range`` keys of ``action``;
+      ``posture``, ``reset_noise_scale`` and ``rsi`` keys of ``start``;
+      ``fall_hip_height_m``, ``max_model_time_s`` and ``time_limit_s`` the ``termination``
+      dict; ``phase_obs=True`` is ``observation=["phase"]``; the "env" reward's weights
+      (``forward_reward_weight``...) are ``reward={"weights": {...}}``. Each old keyword is
+      refused naming its new place.
 
     Example:
         >>> import gymnasium as gym

@@ -52,11 +52,11 @@ class RewardTerm:
 
 REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
     "env": (
-        RewardTerm("forward", 1.0, doc="weight * hip progress / dt [m/s] (forward_reward_weight)"),
-        RewardTerm("alive", 0.5, doc="weight per period not ended by an event (alive_bonus)"),
-        RewardTerm("switch", 1.0, doc="weight per forward model switch (switch_bonus)"),
-        RewardTerm("step", 5.0, doc="weight per completed walking step (step_bonus)"),
-        RewardTerm("ctrl", 0.1, doc="-weight * sum((tau / limit)^2) (ctrl_cost_weight)"),
+        RewardTerm("forward", 1.0, doc="weight * hip progress / dt [m/s]"),
+        RewardTerm("alive", 0.5, doc="weight per period not ended by an event"),
+        RewardTerm("switch", 1.0, doc="weight per forward model switch"),
+        RewardTerm("step", 5.0, doc="weight per completed walking step"),
+        RewardTerm("ctrl", 0.1, doc="-weight * sum((tau / limit)^2)"),
     ),
     "tracking": (
         RewardTerm("pose", 0.5, 5.0, "kernel of the six angles' squared error [rad^2]"),
@@ -135,11 +135,6 @@ clock gates the task terms of Siekmann et al. (2021)."""
 REWARD_TERMS = tuple(f"reward_{t.name}" for t in REWARD_KINDS["env"])
 """``info`` keys of the walking reward's terms (the compiled reward's columns, in order)."""
 
-ENV_WEIGHT_KWARGS = ("forward_reward_weight", "alive_bonus", "switch_bonus", "step_bonus",
-                     "ctrl_cost_weight")  # fmt: skip
-"""The env kwargs that set the ``"env"`` reward's weights (as Gymnasium's MuJoCo envs name
-theirs), in term order."""
-
 
 @dataclass(frozen=True)
 class RewardSettings:
@@ -189,13 +184,11 @@ class RewardSettings:
         return out
 
 
-def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
+def reward_settings(reward: Any) -> RewardSettings:
     """The ``reward`` kwarg: a kind's name or ``{"kind", "weights", "kernels", ...}``.
 
     The dict's other keys: ``"targets"`` (the gait reward's) and ``"gated"`` (the gait
     reward's task terms gated by the cadence kernel).
-    ``env_weights``: the :data:`ENV_WEIGHT_KWARGS` given (None: the registry's); they set the
-    ``"env"`` kind's weights and are refused with another kind (they would do nothing).
     """
     spec = {"kind": reward} if isinstance(reward, str) else reward
     check_mapping("reward", spec, ("kind", "weights", "kernels", "targets", "gated"))
@@ -204,14 +197,6 @@ def reward_settings(reward: Any, env_weights: dict[str, Any]) -> RewardSettings:
     names = [t.name for t in terms]
     weights = {t.name: t.weight for t in terms}
     kernels = {t.name: t.kernel for t in terms}
-    given = {k: v for k, v in env_weights.items() if v is not None}
-    if given and kind != "env":
-        raise ValueError(f"{sorted(given)} set the 'env' reward's weights, not {kind!r}'s; "
-                         "give reward={'kind': ..., 'weights': {...}}")  # fmt: skip
-    for kwarg, value in given.items():
-        weights[names[ENV_WEIGHT_KWARGS.index(kwarg)]] = check_real(
-            kwarg, value, 0.0, REWARD_WEIGHT_MAX
-        )
     for name, value in check_mapping("reward weights", spec.get("weights", {}), names).items():
         weights[name] = check_real(f"reward weight {name!r}", value, 0.0, REWARD_WEIGHT_MAX)
     kernel_names = [t.name for t in terms if t.kernel is not None]

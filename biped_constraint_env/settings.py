@@ -7,11 +7,14 @@ distribution, the action mapping, the reward (:mod:`.rewards`' registry), the ob
 the perturbations (:mod:`.perturbations`). ``repr(settings)`` prints them and
 :meth:`EnvSettings.as_dict` gives them as data (training runs save it).
 
-The public kwargs stay flat where a Gymnasium user types them (``dt``, ``start``,
-``ctrl_cost_weight``, ``strict``...). Two groups are one kwarg each because their members only
-mean something together: ``action`` (``"torque"``, ``"pd"`` or ``{"kind": "pd", "around":
-..., "range": ..., ...}``: the PD mapping's six settings, which torque actions ignore) and
-``reward`` (a kind's name or ``{"kind", "weights", "kernels"}``), as ``perturbations`` is.
+One keyword argument per part, each a name or a dict of that part's settings:
+``physics`` (the integrator options: :data:`PHYSICS_KEYS`, on top of ``preset``), ``action``
+(:data:`ACTION_KEYS`), ``start`` (a start's name, a dict of component weights, or
+:data:`START_KEYS`), ``reward`` (a kind's name or ``{"kind", "weights", "kernels", ...}``),
+``termination`` (:data:`TERMINATION_KEYS`), ``observation`` (a list of
+:data:`OBSERVATION_BLOCKS`), ``perturbations`` and ``command``; besides them ``task``, ``preset``,
+``dt``, ``params``, ``reference`` and ``render_mode``. A retired flat keyword is refused with
+its new place (:data:`MOVED`).
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ from .modes import N_MODELS
 from .options import SimOptions
 from .perturbations import PerturbationSettings, perturbation_settings
 from .reference import OWN_REFERENCE, REFERENCES
-from .rewards import ENV_WEIGHT_KWARGS, RewardSettings, check_fall_height, reward_settings
+from .rewards import RewardSettings, check_fall_height, reward_settings
 from .starts import (
     NOMINAL_POSTURE_RAD,
     RESET_NOISE_SCALE_RAD,
@@ -47,7 +50,6 @@ from .starts import (
 from .tasks import EPISODE_S, MAX_EPISODE_S, TASKS, resolve_options, resolve_task
 from .validation import (
     check_array,
-    check_bool,
     check_choice,
     check_mapping,
     check_names,
@@ -65,7 +67,22 @@ PD_FIXED_POSE_RAD = (-0.1, 0.1, -0.3, -0.4, 0.7)
 ACTION_KINDS = ("torque", "pd")
 PD_AROUND = ("fixed", "reference")
 PD_KEYS = ("kind", "around", "range", "pose", "offset", "gain_scale", "dt")
-"""Keys of the ``action`` dict (all but ``kind`` are the PD mapping's)."""
+"""The ``action`` dict's PD keys (all but ``kind`` are the PD mapping's)."""
+ACTION_KEYS = PD_KEYS + ("torque_limit_nm", "out_of_range")
+"""Keys of the ``action`` dict: the kind, the torque limit [N m] and what an out-of-range action
+does (every kind), and the PD mapping's."""
+PHYSICS_KEYS = ("integrator", "substeps", "impact", "locate_events", "jdot", "strict",
+                "heel_force_includes_foot_weight", "step_tol", "stop_at_switch")  # fmt: skip
+"""Keys of the ``physics`` dict: :class:`~.options.SimOptions` overrides on top of the preset."""
+START_KEYS = ("kind", "posture", "reset_noise_scale", "rsi")
+"""Keys of the ``start`` dict: the start (a name or component weights), the rest posture
+(6,) [rad], the reset noise [rad] and the fraction of reference-state starts."""
+TERMINATION_KEYS = ("fall_hip_height_m", "max_model_time_s", "time_limit_s")
+"""Keys of the ``termination`` dict: a fall height [m], a contact phase's longest time [s] and
+the episode's time limit [s] (simulated time); each None: off."""
+OBSERVATION_BLOCKS = ("phase",)
+"""Blocks the ``observation`` list may append to the 24 base entries (the command's entry
+comes with the command)."""
 
 
 @dataclass(frozen=True)
@@ -143,9 +160,23 @@ class ActionSettings:
 
 @dataclass(frozen=True)
 class ObservationSettings:
-    """Entries appended to the 24 base entries: the contact clock's phase."""
+    """Blocks appended to the 24 base entries (:data:`OBSERVATION_BLOCKS`)."""
 
-    phase_obs: bool
+    blocks: tuple[str, ...] = ()
+
+    @property
+    def phase_obs(self) -> bool:
+        """Whether the contact clock's phase is observed."""
+        return "phase" in self.blocks
+
+
+@dataclass(frozen=True)
+class TerminationSettings:
+    """What ends an episode besides the strict checks (:data:`TERMINATION_KEYS`)."""
+
+    fall_hip_height_m: float | None = None
+    max_model_time_s: float | None = None
+    time_limit_s: float | None = EPISODE_S
 
 
 @dataclass(frozen=True)
@@ -160,11 +191,24 @@ class EnvSettings:
     observation: ObservationSettings
     perturbations: PerturbationSettings
     reference: str
-    fall_hip_height_m: float | None
-    max_model_time_s: float | None = None
-    time_limit_s: float | None = EPISODE_S
+    termination: TerminationSettings = TerminationSettings()
     command: CommandSettings | None = None
     """The commanded speed (:mod:`.command`; None: no command)."""
+
+    @property
+    def fall_hip_height_m(self) -> float | None:
+        """A fall's hip height [m] (None: off)."""
+        return self.termination.fall_hip_height_m
+
+    @property
+    def max_model_time_s(self) -> float | None:
+        """A contact phase's longest time [s] (None: off)."""
+        return self.termination.max_model_time_s
+
+    @property
+    def time_limit_s(self) -> float | None:
+        """The episode's time limit [s] of simulated time (None: none)."""
+        return self.termination.time_limit_s
 
     @property
     def dt(self) -> float:
@@ -196,10 +240,7 @@ class EnvSettings:
                 return x.tolist()
             return x
 
-        out: dict[str, Any] = {"task": self.task, "reference": self.reference,
-                               "fall_hip_height_m": self.fall_hip_height_m,
-                               "max_model_time_s": self.max_model_time_s,
-                               "time_limit_s": self.time_limit_s}  # fmt: skip
+        out: dict[str, Any] = {"task": self.task, "reference": self.reference}
         p = self.physics
         out["physics"] = {
             "params": "paper_biped" if p.params == paper_biped() else "custom",
@@ -207,7 +248,7 @@ class EnvSettings:
             "dt": p.dt,
             "options": {k: plain(v) for k, v in dataclasses.asdict(p.options).items()},
         }
-        for name in ("start", "action", "observation", "perturbations"):
+        for name in ("start", "action", "observation", "termination", "perturbations"):
             group = getattr(self, name)
             out[name] = {f.name: plain(getattr(group, f.name)) for f in dataclasses.fields(group)}
         out["start"]["start"] = start_name(self.start.start)
@@ -218,19 +259,20 @@ class EnvSettings:
         return out
 
 
-def _action_settings(spec: Any, task_spec: Any, limit, out_of_range, dt: float) -> ActionSettings:
-    """The ``action`` kwarg (a kind, or a dict of :data:`PD_KEYS`) on top of the task's."""
+def _action_settings(spec: Any, task_spec: Any, dt: float) -> ActionSettings:
+    """The ``action`` kwarg (a kind, or a dict of :data:`ACTION_KEYS`) on top of the task's."""
 
     def as_dict(x):
-        return {"kind": x} if isinstance(x, str) else dict(check_mapping("action", x, PD_KEYS))
+        return {"kind": x} if isinstance(x, str) else dict(check_mapping("action", x, ACTION_KEYS))
 
     task = as_dict(task_spec)
     given = {} if spec is None else as_dict(spec)
     kind = check_choice("action kind", given.get("kind", task.get("kind", "torque")), ACTION_KINDS)
     merged = {**(task if task.get("kind", "torque") == kind else {}), **given, "kind": kind}
-    limit, out_of_range = check_action_settings(limit, out_of_range)
+    limit, out_of_range = check_action_settings(merged.get("torque_limit_nm", TORQUE_LIMIT_NM),
+                                                merged.get("out_of_range", "clip"))  # fmt: skip
     if kind == "torque":
-        extra = sorted(set(given) - {"kind"})
+        extra = sorted(set(given) - {"kind", "torque_limit_nm", "out_of_range"})
         if extra:
             raise ValueError(f"action: {extra} are PD settings; torque actions take none")
         return ActionSettings("torque", limit, out_of_range)
@@ -304,68 +346,102 @@ def _reference(reference: Any, start: str | tuple) -> str:
     return reference
 
 
+def start_dict(spec: Any) -> dict[str, Any]:
+    """A ``start`` value as a dict of :data:`START_KEYS` (a name or weights: its ``kind``).
+
+    None: an empty dict (the task's start).
+    """
+    if spec is None:
+        return {}
+    if isinstance(spec, dict) and set(spec) & set(START_KEYS):
+        return dict(check_mapping("start", spec, START_KEYS))
+    return {"kind": spec}
+
+
+def with_keys(kwargs: dict[str, Any], part: str, **keys: Any) -> dict[str, Any]:
+    """The env's keyword arguments ``kwargs`` with ``keys`` set inside the dict of ``part``.
+
+    For the dict parts (``physics``, ``start``, ``termination``, ``action``, ``perturbations``):
+    ``with_keys(kw, "termination", time_limit_s=None)`` keeps the part's other keys.
+    """
+    cur = kwargs.get(part)
+    if part == "start":
+        base = start_dict(cur)
+    elif part == "action":
+        base = {} if cur is None else ({"kind": cur} if isinstance(cur, str) else dict(cur))
+    elif part in ("physics", "termination", "perturbations"):
+        base = {} if cur is None else dict(cur)
+    else:
+        raise ValueError(f"with_keys: {part!r} is not a dict part of the env")
+    return {**kwargs, part: {**base, **keys}}
+
+
+def _observation(blocks: Any) -> ObservationSettings:
+    """The ``observation`` kwarg: a list of :data:`OBSERVATION_BLOCKS` (a name: one block)."""
+    blocks = (blocks,) if isinstance(blocks, str) else blocks
+    if not isinstance(blocks, list | tuple):
+        raise ValueError(f"observation must be a list of blocks from {OBSERVATION_BLOCKS}, "
+                         f"got {blocks!r}")  # fmt: skip
+    for b in blocks:
+        check_choice("observation block", b, OBSERVATION_BLOCKS)
+    if len(set(blocks)) != len(blocks):
+        raise ValueError(f"observation: a block appears twice in {list(blocks)}")
+    return ObservationSettings(tuple(blocks))
+
+
+def _termination(spec: Any) -> TerminationSettings:
+    """The ``termination`` kwarg: a dict of :data:`TERMINATION_KEYS` (None: the defaults)."""
+    t = dict(check_mapping("termination", {} if spec is None else spec, TERMINATION_KEYS))
+    limit = t.get("time_limit_s", EPISODE_S)
+    return TerminationSettings(
+        fall_hip_height_m=check_fall_height(t.get("fall_hip_height_m")),
+        max_model_time_s=_check_model_time(t.get("max_model_time_s")),
+        time_limit_s=None if limit is None else check_real(
+            "time_limit_s", limit, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"),
+    )  # fmt: skip
+
+
 def make_settings(
-    params: BipedParams | None = None,
     task: str = "walk",
     preset: str | None = None,
     dt: float | None = None,
-    integrator: str | None = None,
-    substeps: int | None = None,
-    impact: str | None = None,
-    locate_events: bool | None = None,
-    jdot: str | None = None,
-    strict: bool | None = None,
-    heel_force_includes_foot_weight: bool | None = None,
-    step_tol: float | None = None,
-    stop_at_switch: bool | None = None,
-    torque_limit_nm: float = TORQUE_LIMIT_NM,
-    out_of_range: str = "clip",
-    forward_reward_weight: float | None = None,
-    alive_bonus: float | None = None,
-    switch_bonus: float | None = None,
-    step_bonus: float | None = None,
-    ctrl_cost_weight: float | None = None,
-    reset_noise_scale: float = RESET_NOISE_SCALE_RAD,
-    fall_hip_height_m: float | None = None,
-    max_model_time_s: float | None = None,
-    time_limit_s: float | None = EPISODE_S,
-    posture=NOMINAL_POSTURE_RAD,
-    start: str | dict | None = None,
-    phase_obs: bool | None = None,
-    reward: str | dict | None = None,
-    reference: str | None = None,
-    rsi: float | None = None,
+    params: BipedParams | None = None,
+    physics: dict[str, Any] | None = None,
     action: str | dict | None = None,
+    start: str | dict | None = None,
+    reward: str | dict | None = None,
+    termination: dict[str, Any] | None = None,
+    observation: list[str] | tuple[str, ...] | None = None,
     perturbations: dict[str, Any] | None = None,
     command: dict[str, Any] | None = None,
+    reference: str | None = None,
     **unknown: Any,
 ) -> EnvSettings:
     """Validate the env's keyword arguments (``ConstrainedBipedEnv``'s docstring) once.
 
-    ``task`` (:data:`~.tasks.TASKS`) sets the defaults of the arguments it names; each one
-    given explicitly overrides the task's (``action`` and ``reward`` dicts merge onto the
-    task's of the same kind).
+    ``task`` (:data:`~.tasks.TASKS`) sets the defaults of the parts it names; each one given
+    explicitly overrides the task's (``physics`` and ``start`` dicts key by key, ``action`` and
+    ``reward`` dicts key by key onto the task's of the same kind).
     """
     for key in unknown:
+        if key in MOVED:
+            raise ValueError(f"{key} is now {MOVED[key]} (one keyword per part)")
         if key in RETIRED:
             raise ValueError(f"{key}: {RETIRED[key]}")
     check_names("argument(s) of ConstrainedBiped-v0", unknown, ENV_ARGUMENTS + ("render_mode",))
     params = paper_biped() if params is None else params
-    t = resolve_task(task, preset=preset, dt=dt, stop_at_switch=stop_at_switch, start=start,
-                     reward=reward, rsi=rsi, action=action, phase_obs=phase_obs,
-                     command=command)  # fmt: skip
-    sim_overrides = dict(
-        integrator=integrator, substeps=substeps, impact=impact, locate_events=locate_events,
-        jdot=jdot, strict=strict, heel_force_includes_foot_weight=heel_force_includes_foot_weight,
-        step_tol=step_tol, stop_at_switch=t["stop_at_switch"],
-    )  # fmt: skip
-    options = resolve_options(t["preset"], t["dt"], sim_overrides)
+    t = resolve_task(task, preset=preset, dt=dt, reward=reward, action=action,
+                     observation=observation, command=command)  # fmt: skip
+    task_t = TASKS[task]
+    given_physics = check_mapping("physics", {} if physics is None else physics, PHYSICS_KEYS)
+    sim = {**task_t.get("physics", {}), **given_physics}
+    options = resolve_options(t["preset"], t["dt"], sim)
     dt = float(t["dt"])
-    start_kind, q0, noise = check_start_settings(params, t["start"], posture, reset_noise_scale)
-    task_action = TASKS[task].get("action", "torque")
-    weights = dict(zip(ENV_WEIGHT_KWARGS, (forward_reward_weight, alive_bonus, switch_bonus,
-                                           step_bonus, ctrl_cost_weight), strict=True))  # fmt: skip
-    reward_s = reward_settings(_with_kind(reward, TASKS[task].get("reward", "env")), weights)
+    st = {**start_dict(task_t["start"]), **start_dict(start)}
+    start_kind, q0, noise = check_start_settings(
+        params, st["kind"], st.get("posture", NOMINAL_POSTURE_RAD),
+        st.get("reset_noise_scale", RESET_NOISE_SCALE_RAD))  # fmt: skip
+    reward_s = reward_settings(_with_kind(reward, task_t.get("reward", "env")))
     commands = command_settings(t.get("command"))
     if (reward_s.kind == "command") != (commands is not None):
         raise ValueError("reward='command' and the command option go together: reward kind "
@@ -377,20 +453,14 @@ def make_settings(
             start_kind,
             tuple(q0.tolist()),
             noise,
-            check_real("rsi", t["rsi"], 0.0, 1.0),
+            check_real("start rsi", st.get("rsi", 0.0), 0.0, 1.0),
         ),  # fmt: skip
-        action=_action_settings(action, task_action, torque_limit_nm, out_of_range, dt),
+        action=_action_settings(action, task_t.get("action", "torque"), dt),
         reward=reward_s,
-        observation=ObservationSettings(check_bool("phase_obs", t["phase_obs"])),
+        observation=_observation(t["observation"]),
         perturbations=perturbation_settings(perturbations),
         reference=_reference(reference, start_kind),
-        fall_hip_height_m=check_fall_height(fall_hip_height_m),
-        max_model_time_s=_check_model_time(max_model_time_s),
-        time_limit_s=None
-        if time_limit_s is None
-        else check_real(
-            "time_limit_s", time_limit_s, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"
-        ),
+        termination=_termination(termination),
         command=commands,
     )
 
@@ -409,6 +479,19 @@ RETIRED = {
     "docs/ablations.md)",
 }
 """Arguments the env no longer takes, each refused with why (the package is unreleased)."""
+
+MOVED = {
+    **{k: f"physics={{{k!r}: ...}}" for k in PHYSICS_KEYS},
+    **{k: f"action={{{k!r}: ...}}" for k in ("torque_limit_nm", "out_of_range")},
+    **{k: f"start={{{k!r}: ...}}" for k in ("posture", "reset_noise_scale", "rsi")},
+    **{k: f"termination={{{k!r}: ...}}" for k in TERMINATION_KEYS},
+    "phase_obs": "observation=['phase']",
+    **{k: f"reward={{'kind': 'env', 'weights': {{{t!r}: ...}}}}"
+       for k, t in (("forward_reward_weight", "forward"), ("alive_bonus", "alive"),
+                    ("switch_bonus", "switch"), ("step_bonus", "step"),
+                    ("ctrl_cost_weight", "ctrl"))},
+}  # fmt: skip
+"""The flat keywords that became a part's key, each refused naming its new place."""
 
 ENV_ARGUMENTS: tuple[str, ...] = tuple(
     name for name in make_settings.__code__.co_varnames[: make_settings.__code__.co_argcount]

@@ -1,8 +1,10 @@
 """Tasks and fidelity presets, as data: the env's defaults and the paper's setting.
 
 A *task* fixes the control period, the start distribution, whether a period ends at a model
-switch, and the fidelity preset; every one of these stays a keyword argument of the env that
-overrides the task's value.
+switch, the fidelity preset and the learning task's parts (reward, action, observation,
+command); each is written as the env's own keyword argument of that part, and one given
+explicitly overrides the task's (the ``physics`` and ``start`` dicts key by key; ``action`` and
+``reward`` dicts of the task's kind key by key).
 """
 
 from __future__ import annotations
@@ -32,9 +34,8 @@ period), the accurate fixed-step "fixed_step" (RK4_LIMEX x 8 per 20 ms), the che
 
 TASK_DEFAULTS: dict[str, Any] = {
     "reward": "env",
-    "rsi": 0.0,
     "action": "torque",
-    "phase_obs": False,
+    "observation": (),
     "command": None,
 }
 """The learning-task settings every task starts from (the env's own reward, torques)."""
@@ -45,30 +46,34 @@ zero network output passes the mid-stride start's first period
 (docs/recipes/ppo_from_scratch.md)."""
 
 TASKS: dict[str, dict[str, Any]] = {
-    "walk": {"preset": "default", "dt": 0.005, "stop_at_switch": True, "start": "midstride"},
+    "walk": {
+        "preset": "default",
+        "dt": 0.005,
+        "physics": {"stop_at_switch": True},
+        "start": "midstride",
+    },  # fmt: skip
     "track": {
         "preset": "default",
         "dt": 0.005,
-        "stop_at_switch": True,
-        "start": "midstride",
+        "physics": {"stop_at_switch": True},
+        "start": {"kind": "midstride", "rsi": 0.5},
         "reward": "tracking",
-        "rsi": 0.5,
         "action": {"kind": "pd", "around": "reference", "offset": TRACK_PD_OFFSET_RAD},
-        "phase_obs": True,
+        "observation": ("phase",),
     },
     "command": {
         "preset": "default",
         "dt": 0.02,
-        "stop_at_switch": True,
+        "physics": {"stop_at_switch": True},
         "start": "rest",
         "reward": {"kind": "command", "gated": True},
-        "phase_obs": True,
+        "observation": ("phase",),
         "command": {"range": (0.0, 2.0), "zero_fraction": 0.1, "resample_s": (1.0, 5.0)},
     },
     "paper": {
         "preset": "paper",
         "dt": PAPER_SAMPLE_TIME_S,
-        "stop_at_switch": False,
+        "physics": {"stop_at_switch": False},
         "start": "rest",
     },
 }
@@ -108,7 +113,11 @@ MIN_EVENT_TOL = 1e-12
 
 
 def resolve_task(task: str, **overrides: Any) -> dict[str, Any]:
-    """The task's settings with the explicitly given ones (not None) on top."""
+    """The task's settings with the explicitly given ones (not None) on top.
+
+    Whole parts replace the task's; the parts that merge key by key onto the task's (physics,
+    start, action, reward) are merged by :func:`~.settings.make_settings`.
+    """
     check_choice("task", task, sorted(TASKS))
     given = {k: v for k, v in overrides.items() if v is not None}
     return {**TASK_DEFAULTS, **TASKS[task], **given}

@@ -90,7 +90,7 @@ def test_command_reward_follows_the_command_and_pays_standing_at_zero():
 
 
 def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
-    kw = {**KW, "max_model_time_s": 0.1}
+    kw = {**KW, "termination": {"max_model_time_s": 0.1}}
     ended = {}
     for c in (0.0, 1.0):
         env = gym.make("ConstrainedBiped-v0", **kw)

@@ -101,7 +101,7 @@ def test_committed_from_scratch_policy_learned_without_a_teacher_and_walks():
     assert cfg.teacher == "" and cfg.base_controller == "" and cfg.bc_anchor_steps == 0
     assert not available(SCRATCH, "imitation")  # no warm start of any kind
     s = cfg.settings()
-    assert s.reward.kind == "tracking" and s.action.pd and cfg.train_env["rsi"] > 0
+    assert s.reward.kind == "tracking" and s.action.pd and cfg.train_env["start"]["rsi"] > 0
     assert s.start.rsi == 0.0 and s.physics.preset == "default" and s.start.start == "midstride"
     kw = cfg.env_kwargs()
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id)

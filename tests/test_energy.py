@@ -16,7 +16,7 @@ REST = [0.0, -0.1, 0.1, -0.3, -0.4, 0.7]
 
 
 def _env(**kw):
-    env = gym.make("ConstrainedBiped-v0", dt=0.01, stop_at_switch=True, **kw)
+    env = gym.make("ConstrainedBiped-v0", dt=0.01, physics={"stop_at_switch": True, **kw})
     env.reset(seed=0, options={"q": REST, "mode": 1})
     return env
 

@@ -125,7 +125,7 @@ def test_out_of_range_clip_or_raise():
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.full(5, 1e4))
     assert info["reward_ctrl"] == pytest.approx(-0.1 * 5)  # clipped to the limit
-    env2 = ConstrainedBipedEnv(**V1, out_of_range="raise")
+    env2 = ConstrainedBipedEnv(**V1, action={"out_of_range": "raise"})
     env2.reset(seed=0)
     with pytest.raises(ValueError, match="limit"):
         env2.step(np.full(5, 200.0))
@@ -155,7 +155,7 @@ def test_compiled_torque_check_agrees_with_validate_actions(policy):
 
 
 def test_refused_action_leaves_the_state():
-    env = ConstrainedBipedEnv(**V1, out_of_range="raise")
+    env = ConstrainedBipedEnv(**V1, action={"out_of_range": "raise"})
     env.reset(seed=0)
     before = env.state
     for bad in (np.array([0, 0, np.nan, 0, 0]), np.full(5, 151.0)):
@@ -189,9 +189,9 @@ def test_bad_constructor_arguments():
     with pytest.raises(ValueError, match="dt"):
         ConstrainedBipedEnv(dt=-0.01)
     with pytest.raises(ValueError, match="torque_limit_nm"):
-        ConstrainedBipedEnv(torque_limit_nm=np.nan)
+        ConstrainedBipedEnv(action={"torque_limit_nm": np.nan})
     with pytest.raises(ValueError, match="integrator"):
-        ConstrainedBipedEnv(integrator="verlet")
+        ConstrainedBipedEnv(physics={"integrator": "verlet"})
 
 
 def test_termination_reason_and_no_truncation_before_limit():
@@ -223,7 +223,10 @@ def test_paper_preset_options():
         o.strict,
         o.heel_force_includes_foot_weight,
     ) == ("euler", "paper", False, "finite_difference", False, False)
-    assert ConstrainedBipedEnv(preset="paper", integrator="rk4").options.integrator == "rk4"
+    assert (
+        ConstrainedBipedEnv(preset="paper", physics={"integrator": "rk4"}).options.integrator
+        == "rk4"
+    )
 
 
 def test_pickle_roundtrip_gives_same_future():
@@ -268,7 +271,9 @@ def test_switch_and_alive_terms():
 
 
 def test_fall_termination_optional():
-    env = ConstrainedBipedEnv(**V1, fall_hip_height_m=2.99)  # zero torque: hip below in ~9 periods
+    env = ConstrainedBipedEnv(
+        **V1, termination={"fall_hip_height_m": 2.99}
+    )  # hip below in ~9 periods
     env.reset(seed=0)
     for _ in range(100):
         _, _, te, _, info = env.step(np.zeros(5))
@@ -276,7 +281,7 @@ def test_fall_termination_optional():
             break
     assert te and info["termination_reason"] == "fall"
     with pytest.raises(ValueError, match="fall_hip_height_m"):
-        ConstrainedBipedEnv(fall_hip_height_m=np.nan)
+        ConstrainedBipedEnv(termination={"fall_hip_height_m": np.nan})
 
 
 def test_midstride_start():
@@ -325,7 +330,7 @@ def test_stride_start_draws_the_swing_leg_along_its_swing():
         midstride_start,
     )
 
-    env = ConstrainedBipedEnv(start="stride", reset_noise_scale=0.0)
+    env = ConstrainedBipedEnv(start={"kind": "stride", "reset_noise_scale": 0.0})
     swings, knees, rates, modes = [], [], [], set()
     for seed in range(200):
         _, info = env.reset(seed=seed)
@@ -377,7 +382,9 @@ def test_the_track_task_is_the_from_scratch_recipes_settings():
     narrower = gym.make("ConstrainedBiped-v0", task="track", action={"range": 0.5}).unwrapped
     assert narrower.settings.action.range == 0.5  # merged onto the task's PD mapping
     assert narrower.settings.action.around == "reference"
-    plain = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0, action="torque").unwrapped
+    plain = gym.make(
+        "ConstrainedBiped-v0", task="track", start={"rsi": 0.0}, action="torque"
+    ).unwrapped
     assert plain.settings.start.rsi == 0.0 and not plain.settings.action.pd
     walk = gym.make("ConstrainedBiped-v0").unwrapped
     assert walk.settings.reward.kind == "env" and not walk.settings.action.pd
@@ -390,7 +397,7 @@ def test_episodes_are_truncated_by_simulated_time_in_the_single_and_batched_env(
     early at switches: the single env and every row of the batched env alike."""
     from training.controller.model_controller import controller_from
 
-    kw = {"dt": dt, "time_limit_s": 3.0}
+    kw = {"dt": dt, "termination": {"time_limit_s": 3.0}}
     env = gym.make(ENV_ID, **kw)
     ctl = controller_from("model:teacher_robust")
     obs, _ = env.reset(seed=0)

@@ -145,7 +145,7 @@ def test_reset_options_are_refused_by_name_or_run(options):
     out_of_range=st.sampled_from(["clip", "raise"]),
 )
 def test_actions_are_refused_or_run(action, dtype, out_of_range):
-    env = ConstrainedBipedEnv(out_of_range=out_of_range)
+    env = ConstrainedBipedEnv(action={"out_of_range": out_of_range})
     env.reset(seed=0)
     try:
         a = np.asarray(action, dtype=dtype) if dtype is not None else action

@@ -19,7 +19,7 @@ SWING_ANKLE = 6  # keypoints: stance toe, heel, joints 1-5 (the swing ankle is j
 
 
 def _reward(**targets):
-    return GaitReward(reward_settings({"kind": "gait", "targets": targets}, {}), 0.02, 1)
+    return GaitReward(reward_settings({"kind": "gait", "targets": targets}), 0.02, 1)
 
 
 def _terms(g, progress, z, swing_vy, mode, t_model, steps=0, alive=True):
@@ -61,10 +61,10 @@ def test_per_model_cadence_targets_and_the_gate():
     """A cadence target per model (1-4) is the target of the current model; ``gated`` multiplies
     the speed, height and swing terms by the cadence kernel, and changes nothing on time."""
     per = (0.6, 0.25, 0.15, 0.1)
-    g = GaitReward(reward_settings({"kind": "gait", "targets": {"cadence": list(per)}}, {}),
+    g = GaitReward(reward_settings({"kind": "gait", "targets": {"cadence": list(per)}}),
                    0.02, 1)  # fmt: skip
     gated = GaitReward(reward_settings({"kind": "gait", "targets": {"cadence": list(per)},
-                                        "gated": True}, {}), 0.02, 1)  # fmt: skip
+                                        "gated": True}), 0.02, 1)  # fmt: skip
     k, w = TERMS["cadence"].kernel, TERMS["cadence"].weight
     for mode, target in zip((1, 2, 3, 4), per, strict=True):
         args = (0.02, 2.9, 0.7, mode, target + 0.2)
@@ -143,7 +143,7 @@ def test_max_model_time_ends_an_episode_held_in_one_model():
     teacher = controller_from("model:teacher_robust")
     ends = []
     for limit in (None, 0.3):
-        env = gym.make("ConstrainedBiped-v0", max_model_time_s=limit)
+        env = gym.make("ConstrainedBiped-v0", termination={"max_model_time_s": limit})
         obs, _ = env.reset(seed=3)
         held = 0
         for _ in range(1000):
@@ -157,4 +157,4 @@ def test_max_model_time_ends_an_episode_held_in_one_model():
     assert term and reason == "model_time" and mode in (1, 2)
     assert held * 0.005 == pytest.approx(0.3 + 0.005, abs=1e-9)  # 61 periods without a switch
     with pytest.raises(ValueError, match="max_model_time_s"):
-        gym.make("ConstrainedBiped-v0", max_model_time_s=0.0)
+        gym.make("ConstrainedBiped-v0", termination={"max_model_time_s": 0.0})

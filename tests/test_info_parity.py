@@ -13,20 +13,20 @@ from training.controller.model_controller import controller_from
 
 OPTIONS = [
     {},
-    {"reward": {"weights": {"step": 2.0, "ctrl": 0.3}}, "alive_bonus": 0.2},
+    {"reward": {"weights": {"step": 2.0, "ctrl": 0.3, "alive": 0.2}}},
     {
         "reward": {"kind": "tracking", "weights": {"pose": 0.7}, "kernels": {"hip_speed": 2.0}},
         "action": "pd",
     },
     {"task": "paper"},
-    {"phase_obs": True, "start": "mixed"},
-    {"reward": "tracking", "rsi": 0.5, "phase_obs": True},
+    {"observation": ["phase"], "start": "mixed"},
+    {"reward": "tracking", "start": {"rsi": 0.5}, "observation": ["phase"]},
     {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}},
     {"action": {"kind": "pd", "around": "reference"}, "reward": "tracking", "dt": 0.01},
     {"perturbations": {"push_impulse_ns": -0.3, "push_at_s": 0.1, "obs_noise": (1e-3, 1e-2)}},
     {"reward": {"kind": "gait", "targets": {"speed": 0.8}, "weights": {"step": 2.0}}},
     {"reward": "gait", "action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}, "dt": 0.02},
-    {"reward": "gait", "max_model_time_s": 0.1},
+    {"reward": "gait", "termination": {"max_model_time_s": 0.1}},
     {
         "reward": {"kind": "gait", "gated": True, "targets": {"cadence": [0.3, 0.1, 0.1, 0.1]}},
         "action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]},

@@ -20,29 +20,29 @@ POSTURE = list(NOMINAL_POSTURE_RAD)
 @pytest.mark.parametrize(
     ("kwargs", "name"),
     [
-        ({"strict": 0.5}, "strict"),
-        ({"strict": "0"}, "strict"),
-        ({"strict": "no"}, "strict"),
-        ({"locate_events": 1}, "locate_events"),
-        ({"stop_at_switch": "yes"}, "stop_at_switch"),
+        ({"physics": {"strict": 0.5}}, "strict"),
+        ({"physics": {"strict": "0"}}, "strict"),
+        ({"physics": {"strict": "no"}}, "strict"),
+        ({"physics": {"locate_events": 1}}, "locate_events"),
+        ({"physics": {"stop_at_switch": "yes"}}, "stop_at_switch"),
         ({"dt": True}, "dt"),
         ({"dt": 1e308}, "dt"),
         ({"dt": float("nan")}, "dt"),
-        ({"substeps": 10**9}, "substeps"),
-        ({"substeps": 2**64}, "substeps"),
-        ({"substeps": 2.0}, "substeps"),
-        ({"step_tol": 1e-30}, "step_tol"),
+        ({"physics": {"substeps": 10**9}}, "substeps"),
+        ({"physics": {"substeps": 2**64}}, "substeps"),
+        ({"physics": {"substeps": 2.0}}, "substeps"),
+        ({"physics": {"step_tol": 1e-30}}, "step_tol"),
         ({"params": "x"}, "params"),
-        ({"torque_limit_nm": 1e-170}, "torque_limit_nm"),
-        ({"torque_limit_nm": True}, "torque_limit_nm"),
-        ({"reset_noise_scale": 9e307}, "reset_noise_scale"),
-        ({"posture": [str(x) for x in POSTURE]}, "posture"),
-        ({"posture": [True] * 6}, "posture"),
-        ({"alive_bonus": float("inf")}, "alive_bonus"),
-        ({"fall_hip_height_m": "1"}, "fall_hip_height_m"),
+        ({"action": {"torque_limit_nm": 1e-170}}, "torque_limit_nm"),
+        ({"action": {"torque_limit_nm": True}}, "torque_limit_nm"),
+        ({"start": {"reset_noise_scale": 9e307}}, "reset_noise_scale"),
+        ({"start": {"posture": [str(x) for x in POSTURE]}}, "posture"),
+        ({"start": {"posture": [True] * 6}}, "posture"),
+        ({"reward": {"weights": {"alive": float("inf")}}}, "alive"),
+        ({"termination": {"fall_hip_height_m": "1"}}, "fall_hip_height_m"),
         ({"task": 1}, "task"),
-        ({"preset": None, "integrator": True}, "integrator"),
-        ({"out_of_range": "wrap"}, "out_of_range"),
+        ({"preset": None, "physics": {"integrator": True}}, "integrator"),
+        ({"action": {"out_of_range": "wrap"}}, "out_of_range"),
     ],
 )
 def test_bad_make_kwarg_is_refused_by_name(kwargs, name):
@@ -50,11 +50,31 @@ def test_bad_make_kwarg_is_refused_by_name(kwargs, name):
         gym.make("ConstrainedBiped-v0", **kwargs)
 
 
+@pytest.mark.parametrize(
+    ("old", "where"),
+    [("strict", "physics={'strict'"), ("stop_at_switch", "physics={'stop_at_switch'"),
+     ("torque_limit_nm", "action={'torque_limit_nm'"), ("rsi", "start={'rsi'"),
+     ("posture", "start={'posture'"), ("time_limit_s", "termination={'time_limit_s'"),
+     ("phase_obs", "observation=['phase']"), ("alive_bonus", "'weights': {'alive'")],
+)  # fmt: skip
+def test_a_flat_keyword_of_a_part_is_refused_naming_its_new_place(old, where):
+    """One keyword per part: each old flat keyword names the part that now holds it."""
+    with pytest.raises(ValueError, match="one keyword per part") as e:
+        gym.make("ConstrainedBiped-v0", **{old: 1.0})
+    assert where in str(e.value) and len(str(e.value).splitlines()) == 1
+
+
+def test_the_env_takes_one_keyword_per_part():
+    assert set(ENV_ARGUMENTS) == {"task", "preset", "dt", "params", "physics", "action", "start",
+                                  "reward", "termination", "observation", "perturbations",
+                                  "command", "reference", "render_mode"}  # fmt: skip
+
+
 def test_misspelt_kwarg_lists_the_valid_names():
     with pytest.raises(ValueError) as e:
-        gym.make("ConstrainedBiped-v0", stirct=True)
+        gym.make("ConstrainedBiped-v0", physcs={"strict": True})
     msg = str(e.value)
-    assert "'stirct'" in msg and "did you mean 'strict'" in msg
+    assert "'physcs'" in msg and "did you mean 'physics'" in msg
     assert all(name in msg for name in ENV_ARGUMENTS)
 
 
@@ -95,7 +115,9 @@ def test_step_needs_a_reset_first_and_after_every_end():
 
 
 def test_fall_termination_ends_the_episode_for_step():
-    env = ConstrainedBipedEnv(fall_hip_height_m=10.0)  # the hip is always below 10 m
+    env = ConstrainedBipedEnv(
+        termination={"fall_hip_height_m": 10.0}
+    )  # the hip is always below 10 m
     env.reset(seed=0)
     _, _, terminated, _, info = env.step(np.zeros(5))
     assert terminated
@@ -116,7 +138,7 @@ def test_vector_env_step_needs_a_reset_first():
         ({"num_envs": 0}, "num_envs"),
         ({"num_threads": 0}, "num_threads"),
         ({"autoreset_mode": "never"}, "autoreset_mode"),
-        ({"stirct": True}, "strict"),
+        ({"physcs": {"strict": True}}, "physcs"),
     ],
 )
 def test_bad_vector_kwarg_is_refused_by_name(kwargs, name):
@@ -130,7 +152,7 @@ def test_large_reset_noise_redraws_instead_of_failing_the_batch(monkeypatch):
     draws = []
     sample = starts.sample_start
     monkeypatch.setattr(starts, "sample_start", lambda *a: draws.append(1) or sample(*a))
-    kw = {"reset_noise_scale": 0.4}
+    kw = {"start": {"reset_noise_scale": 0.4}}
     n = 12
     venv = gym.make_vec(
         "ConstrainedBiped-v0", num_envs=n, vectorization_mode="vector_entry_point", **kw
@@ -149,7 +171,7 @@ def test_large_reset_noise_redraws_instead_of_failing_the_batch(monkeypatch):
 
 def test_hopeless_reset_noise_is_refused_by_name(monkeypatch):
     monkeypatch.setattr(starts, "MAX_START_DRAWS", 1)
-    env = ConstrainedBipedEnv(reset_noise_scale=1.0)
+    env = ConstrainedBipedEnv(start={"reset_noise_scale": 1.0})
     with pytest.raises(ValueError, match="reset_noise_scale"):
         for seed in range(50):
             env.reset(seed=seed)
@@ -165,7 +187,7 @@ def test_the_error_controller_never_proposes_a_step_below_its_floor():
 
 
 def test_smallest_step_tolerance_finishes_a_period():
-    env = ConstrainedBipedEnv(step_tol=1e-8, start="rest")
+    env = ConstrainedBipedEnv(physics={"step_tol": 1e-8}, start="rest")
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(5))
     assert info["t"] > 0

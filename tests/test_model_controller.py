@@ -21,7 +21,7 @@ from training.controller.model_controller import (
 
 
 def _env():
-    return ConstrainedBipedEnv(dt=0.005, stop_at_switch=True)
+    return ConstrainedBipedEnv(dt=0.005, physics={"stop_at_switch": True})
 
 
 def _start(rate=-1.0):

@@ -23,8 +23,8 @@ ACTION = np.array([0.1, -0.1, 0.2, 0.1, -0.05])
 def _pd_run(dt: float, pd_dt: float, periods: int, action=ACTION) -> np.ndarray:
     """(q, q-dot) after ``periods`` of a constant PD action from rest (no noise)."""
     env = gym.make(
-        "ConstrainedBiped-v0", dt=dt, action={"kind": "pd", "dt": pd_dt}, start="rest",
-        reset_noise_scale=0.0, stop_at_switch=False,
+        "ConstrainedBiped-v0", dt=dt, action={"kind": "pd", "dt": pd_dt},
+        start={"kind": "rest", "reset_noise_scale": 0.0}, physics={"stop_at_switch": False},
     )  # fmt: skip
     env.reset(seed=0)
     for _ in range(periods):
@@ -66,8 +66,8 @@ def test_pd_at_the_period_is_the_held_torque_law():
 
 def test_pd_torque_limit_applies_at_every_physics_step():
     env = gym.make(
-        "ConstrainedBiped-v0", dt=0.02, action={"kind": "pd", "gain_scale": 100.0}, start="rest",
-        torque_limit_nm=40.0,
+        "ConstrainedBiped-v0", dt=0.02, start="rest",
+        action={"kind": "pd", "gain_scale": 100.0, "torque_limit_nm": 40.0},
     )  # fmt: skip
     env.reset(seed=0)
     _, reward, _, _, info = env.step(np.ones(5))

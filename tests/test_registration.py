@@ -44,7 +44,7 @@ def test_paper_task_and_overrides():
     fixed = dict(preset="fixed_step")
     assert gym.make("ConstrainedBiped-v0", **fixed).unwrapped.options.substeps == 2  # 2.5 ms
     assert gym.make("ConstrainedBiped-v0", dt=0.007, **fixed).unwrapped.options.substeps == 3
-    assert gym.make("ConstrainedBiped-v0", substeps=5).unwrapped.options.substeps == 5
+    assert gym.make("ConstrainedBiped-v0", physics={"substeps": 5}).unwrapped.options.substeps == 5
     assert set(TASKS) == {"walk", "track", "command", "paper"}
 
 

@@ -15,7 +15,7 @@ def test_conditions_cover_pushes_both_ways_noise_model_and_sensors():
     assert names[0] == "nominal" and len(set(names)) == len(names)
     pushes = [kw["perturbations"]["push_impulse_ns"] for g, _, kw in rows if g == "push"]
     assert sorted(pushes) == sorted([s * p for p in PUSH_IMPULSES_NS for s in (1, -1)])
-    noise = [kw["reset_noise_scale"] for g, _, kw in rows if g == "reset noise"]
+    noise = [kw["start"]["reset_noise_scale"] for g, _, kw in rows if g == "reset noise"]
     assert noise == [0.03, 0.05]
 
 

@@ -34,7 +34,7 @@ def test_start_mixture_draws_its_components_by_weight_the_same_in_both_envs():
     b = gym.make("ConstrainedBiped-v0", start={"rest": 1, "midstride": 1})
     for s in range(10):
         assert np.array_equal(a.reset(seed=s)[0], b.reset(seed=s)[0])
-    kw = {"start": {"stride": 0.75, "midstride": 0.25}, "reset_noise_scale": 0.0}
+    kw = {"start": {"kind": {"stride": 0.75, "midstride": 0.25}, "reset_noise_scale": 0.0}}
     env = gym.make("ConstrainedBiped-v0", **kw)
     swing = midstride_start(-1.0, -0.2)[0][3]  # the mid-stride start's swing thigh
     picks = []
@@ -120,7 +120,7 @@ SEED = 2  # start="mixed" draws rest, rest, mid-stride for seeds 2, 3, 4 (checke
 
 def test_phase_observation_single_equals_batched_and_follows_the_clock():
     n, periods = 3, 400
-    kw = {"start": "mixed", "phase_obs": True}
+    kw = {"start": "mixed", "observation": ["phase"]}
     venv = gym.make_vec(
         "ConstrainedBiped-v0", num_envs=n, vectorization_mode="vector_entry_point", **kw
     )
@@ -146,7 +146,7 @@ def test_phase_observation_single_equals_batched_and_follows_the_clock():
 
 
 def test_phase_clock_restarts_at_each_switch():
-    env = gym.make("ConstrainedBiped-v0", start="rest", phase_obs=True)
+    env = gym.make("ConstrainedBiped-v0", start="rest", observation=["phase"])
     ctl = controller_from(TEACHER)
     obs, info = env.reset(seed=0)
     ctl.reset()

@@ -11,8 +11,8 @@ from biped_constraint_env.reference import load_reference
 from biped_constraint_env.rewards import REWARD_KINDS
 from biped_constraint_env.settings import PD_FIXED_POSE_RAD
 
-TRACK = {"reward": "tracking", "rsi": 0.5, "action": {"kind": "pd", "around": "reference",
-         "range": 0.5}, "phase_obs": True}  # fmt: skip
+TRACK = {"reward": "tracking", "start": {"rsi": 0.5}, "action": {"kind": "pd",
+         "around": "reference", "range": 0.5}, "observation": ["phase"]}  # fmt: skip
 TERMS = {t.name: t for t in REWARD_KINDS["tracking"]}
 
 
@@ -75,7 +75,7 @@ def test_kernel_terms_are_their_weights_on_the_reference_and_fall_as_documented(
 
 
 def test_env_reward_is_the_sum_of_the_tracking_terms_in_info():
-    env = gym.make("ConstrainedBiped-v0", reward="tracking", rsi=1.0,
+    env = gym.make("ConstrainedBiped-v0", reward="tracking", start={"rsi": 1.0},
                    action={"kind": "pd", "around": "reference"})  # fmt: skip
     env.reset(seed=1)
     seen = 0
@@ -106,7 +106,7 @@ def test_pd_targets_give_the_documented_torques(offset):
         want = PD_KP * (target - st.q[1:]) + PD_KD * (rate - st.qd[1:])
         np.testing.assert_allclose(info["torque"], np.clip(want, -150, 150))
     assert env.action_space.high.tolist() == [1.0] * 5
-    env = ConstrainedBipedEnv(action="pd", out_of_range="raise")
+    env = ConstrainedBipedEnv(action={"kind": "pd", "out_of_range": "raise"})
     env.reset(seed=0)
     with pytest.raises(ValueError, match="exceeds the PD-target bound"):  # the env's policy
         env.step(np.full(5, 1.5))
@@ -114,7 +114,11 @@ def test_pd_targets_give_the_documented_torques(offset):
 
 @pytest.mark.parametrize(
     "kw",
-    [TRACK, {"action": "pd"}, {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}, "rsi": 0.3}],
+    [
+        TRACK,
+        {"action": "pd"},
+        {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}, "start": {"rsi": 0.3}},
+    ],
 )
 def test_tracking_options_single_equals_batched(kw):
     n = 5
@@ -143,7 +147,7 @@ def test_tracking_options_single_equals_batched(kw):
 
 
 def test_reference_state_starts_are_recorded_states_with_their_clock():
-    env = ConstrainedBipedEnv(rsi=1.0, phase_obs=True)
+    env = ConstrainedBipedEnv(start={"rsi": 1.0}, observation=["phase"])
     ref = load_reference("midstride")
     rows = np.concatenate([ref.q, ref.qd], axis=1)
     for seed in range(20):
@@ -164,10 +168,10 @@ def test_reference_state_starts_are_recorded_states_with_their_clock():
 
 def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
     plain = ConstrainedBipedEnv()
-    off = ConstrainedBipedEnv(reward="tracking", rsi=0.0)
+    off = ConstrainedBipedEnv(reward="tracking", start={"rsi": 0.0})
     for seed in range(5):
         np.testing.assert_array_equal(plain.reset(seed=seed)[0], off.reset(seed=seed)[0])
-    half = ConstrainedBipedEnv(rsi=0.5)
+    half = ConstrainedBipedEnv(start={"rsi": 0.5})
     ref_q = load_reference("midstride").q
     on_ref = 0
     for seed in range(200):
@@ -178,7 +182,7 @@ def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
 
 def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_state():
     # a mid-stride start with the mid-stride reference: the teacher's walk from such a start
-    env = ConstrainedBipedEnv(reward="tracking", phase_obs=True)
+    env = ConstrainedBipedEnv(reward="tracking", observation=["phase"])
     obs, _ = env.reset(seed=0)
     assert env.core.tracking.first[0] and env.core.clock.j[0] == 0 and env.core.clock.mode[0] == 2
     np.testing.assert_array_equal(_at_clock(env), env.core.tracking.ref.tables[(1, 2)][0, :12])
@@ -189,7 +193,7 @@ def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_sta
     assert not env.core.tracking.first[0] or term
     # a mid-stride start with the rest reference: the gait's nearest state of model 2
     env = ConstrainedBipedEnv(start="mixed", reference="rest", reward="tracking",
-                              phase_obs=True)  # fmt: skip
+                              observation=["phase"])  # fmt: skip
     for seed in range(10):
         obs, info = env.reset(seed=seed)
         if info["mode"] == 2:
@@ -207,7 +211,7 @@ def test_a_start_follows_its_own_references_first_step_else_the_nearest_gait_sta
 def test_mixed_starts_follow_the_recording_of_their_own_kind():
     """``start="mixed"`` (``reference="own"``): a start at rest follows the rest recording's
     first step, a mid-stride start the mid-stride recording's."""
-    env = ConstrainedBipedEnv(start="mixed", reward="tracking", phase_obs=True)
+    env = ConstrainedBipedEnv(start="mixed", reward="tracking", observation=["phase"])
     assert env.settings.reference == "own"
     tr = env.core.tracking
     kinds = {ref.start: i for i, ref in enumerate(tr.refs)}
@@ -221,16 +225,17 @@ def test_mixed_starts_follow_the_recording_of_their_own_kind():
         np.testing.assert_array_equal(_at_clock(env), ref.tables[(1, info["mode"])][0, :12])
     assert seen == {"rest", "midstride"}
     venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
-                        start="mixed", reward="tracking", phase_obs=True, rsi=0.5)  # fmt: skip
-    envs = [gym.make("ConstrainedBiped-v0", start="mixed", reward="tracking", phase_obs=True,
-                     rsi=0.5) for _ in range(4)]  # fmt: skip
+                        start={"kind": "mixed", "rsi": 0.5}, reward="tracking",
+                        observation=["phase"])  # fmt: skip
+    envs = [gym.make("ConstrainedBiped-v0", start={"kind": "mixed", "rsi": 0.5},
+                     reward="tracking", observation=["phase"]) for _ in range(4)]  # fmt: skip
     vo, _ = venv.reset(seed=3)
     np.testing.assert_array_equal(vo, [e.reset(seed=3 + i)[0] for i, e in enumerate(envs)])
 
 
 def test_default_env_is_unchanged_by_the_tracking_options_defaults():
     a = ConstrainedBipedEnv()
-    b = ConstrainedBipedEnv(reward="env", action="torque", rsi=0.0)
+    b = ConstrainedBipedEnv(reward="env", action="torque", start={"rsi": 0.0})
     assert a.core.tracking is None and a.core.clock is None
     oa, _ = a.reset(seed=4)
     ob, _ = b.reset(seed=4)
@@ -244,7 +249,8 @@ def test_default_env_is_unchanged_by_the_tracking_options_defaults():
 
 @pytest.mark.parametrize(
     "kw, name",
-    [({"reward": "imitate"}, "reward"), ({"rsi": 1.5}, "rsi"), ({"action": "pos"}, "action"),
+    [({"reward": "imitate"}, "reward"), ({"start": {"rsi": 1.5}}, "rsi"),
+     ({"action": "pos"}, "action"),
      ({"action": {"kind": "pd", "around": "teacher"}}, "around"),
      ({"action": {"kind": "pd", "range": 0.0}}, "range"),
      ({"reference": "backwards"}, "reference"), ({"reference_obs": 1}, "reference_obs"),
@@ -253,7 +259,7 @@ def test_default_env_is_unchanged_by_the_tracking_options_defaults():
      ({"action": {"kind": "pd", "gain": 2.0}}, "gain_scale"),
      ({"action": {"kind": "torque", "range": 0.5}}, "PD settings"),
      ({"reward": {"kind": "tracking", "weights": {"pos": 1.0}}}, "pose"),
-     ({"reward": "tracking", "ctrl_cost_weight": 0.2}, "ctrl_cost_weight")],
+     ({"reward": {"kind": "tracking", "weights": {"ctrl": 0.2}}}, "ctrl")],
 )  # fmt: skip
 def test_bad_tracking_options_are_refused_by_name(kw, name):
     with pytest.raises(ValueError, match=name):
@@ -264,8 +270,8 @@ def test_the_reference_clock_counts_its_own_periods_at_any_control_period():
     """At dt = 20 ms the clock's j periods are 4 j of the 5 ms reference's rows."""
     import gymnasium as gym
 
-    fine = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0).unwrapped
-    coarse = gym.make("ConstrainedBiped-v0", task="track", rsi=0.0, dt=0.02).unwrapped
+    fine = gym.make("ConstrainedBiped-v0", task="track", start={"rsi": 0.0}).unwrapped
+    coarse = gym.make("ConstrainedBiped-v0", task="track", start={"rsi": 0.0}, dt=0.02).unwrapped
     for env in (fine, coarse):
         env.reset(seed=0)
     tf, tc = fine.core.tracking, coarse.core.tracking

@@ -189,16 +189,16 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     small += ["--out-dir", str(tmp_path)]
     config = "training/configs/ppo_from_scratch.toml"
     assert train_ppo.main(["--config", config, *small]) == 0
-    relu = ["--seed", "1", "--train-env", "rsi=0", "--activation", "relu"]
+    relu = ["--seed", "1", "--train-env", "start={rsi = 0}", "--activation", "relu"]
     assert train_ppo.main(["--config", config, *small, *relu]) == 0
     with pytest.raises(SystemExit, match="activation"):
         train_ppo.main(["--config", config, *small, "--activation", "sigmoid"])
     run0, run1 = sorted((tmp_path / "train_ppo").iterdir())
     cfg = read_config(run0)
     s = cfg.settings()
-    assert s.action.pd and s.reward.kind == "tracking" and cfg.train_env["rsi"] > 0
-    assert cfg.env_kwargs()["rsi"] == 0.0 and cfg.train_env_kwargs()["rsi"] == 0.5
-    assert s.action.offset[1][0] > 0 and read_config(run1).train_env == {"rsi": 0}
+    assert s.action.pd and s.reward.kind == "tracking" and cfg.train_env["start"]["rsi"] > 0
+    assert cfg.env_kwargs()["start"]["rsi"] == 0.0 and cfg.train_env_kwargs()["start"]["rsi"] == 0.5
+    assert s.action.offset[1][0] > 0 and read_config(run1).train_env == {"start": {"rsi": 0}}
     kinds = [{type(m).__name__ for m in load_policy(r)[0].modules()} for r in (run0, run1)]
     assert "Tanh" in kinds[0] and "ReLU" not in kinds[0] and "ReLU" in kinds[1]
     seen = []
@@ -216,9 +216,9 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     assert (tmp_path / "curves.png").stat().st_size > 0
     rows = json.loads(out.read_text())["rows"]
     assert [r["training_seed"] for r in rows] == [0, 1]
-    assert rows[1]["changes"] == "train_env.rsi=0, activation='relu'"
+    assert rows[1]["changes"] == "train_env.start={'rsi': 0}, activation='relu'"
     assert "PD" in rows[0]["in_the_loop"]
-    assert all(kw["action"]["kind"] == "pd" and kw["rsi"] == 0.0 for kw in seen)
+    assert all(kw["action"]["kind"] == "pd" and kw["start"]["rsi"] == 0.0 for kw in seen)
 
 
 @pytest.mark.parametrize(
@@ -393,7 +393,9 @@ def test_env_table_flags_go_on_top_of_the_config_table():
     cfg = parse_config(PPOConfig, ["--config", "training/configs/ppo_from_scratch.toml",
                                    "--env", "dt=0.02", 'start="rest"'], "")  # fmt: skip
     assert cfg.env["dt"] == 0.02 and cfg.env["start"] == "rest"
-    assert cfg.env["reward"] == "tracking" and cfg.train_env == {"rsi": 0.5}  # the file's
+    assert cfg.env["reward"] == "tracking" and cfg.train_env == {
+        "start": {"rsi": 0.5}
+    }  # the file's
     assert cfg.settings().dt == 0.02 and cfg.settings().action.pd
     import tomllib
 

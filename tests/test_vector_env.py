@@ -87,7 +87,7 @@ def test_same_step_autoreset_matches_next_step():
 
 
 def test_fall_termination_same_in_batched_and_single():
-    kw = dict(num_envs=3, fall_hip_height_m=2.7, **V1)
+    kw = dict(num_envs=3, termination={"fall_hip_height_m": 2.7}, **V1)
     ob, rb, tb = _run_kw("vector_entry_point", kw)
     os_, rs, ts = _run_kw("sync", kw)
     assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
@@ -104,7 +104,7 @@ def test_midstride_start_same_in_batched_and_single():
 
 def test_limex_same_in_batched_and_single():
     """The L-stable LIMEX integrator: batched = single, bit for bit."""
-    kw = dict(num_envs=3, integrator="limex", substeps=2)
+    kw = dict(num_envs=3, physics={"integrator": "limex", "substeps": 2})
     ob, rb, tb = _run_kw("vector_entry_point", kw, steps=150)
     os_, rs, ts = _run_kw("sync", kw, steps=150)
     assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)
@@ -112,7 +112,7 @@ def test_limex_same_in_batched_and_single():
 
 def test_rk4_limex_same_in_batched_and_single():
     """The stiffness-switching integrator with explicit substeps: batched = single, bit for bit."""
-    kw = dict(num_envs=3, integrator="rk4_limex", substeps=1)
+    kw = dict(num_envs=3, physics={"integrator": "rk4_limex", "substeps": 1})
     ob, rb, tb = _run_kw("vector_entry_point", kw, steps=150)
     os_, rs, ts = _run_kw("sync", kw, steps=150)
     assert tb.any() and np.array_equal(ob, os_) and np.array_equal(rb, rs)

@@ -448,8 +448,8 @@ def test_a_safetensors_file_the_rust_parser_refuses_is_one_line(tmp_path, monkey
         ("x = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
         ('[env]\nrender_mode = "human"\n', "render_mode is not a setting"),
         ("[env]\ndt = 1e-9\n", "dt must be"),
-        ("[env]\nsubsteps = 100000\n", "substeps must be at most"),
-        ("[env]\nstep_tol = 1e-10\n", "step_tol must be at least"),
+        ("[env]\nphysics = {substeps = 100000}\n", "substeps must be at most"),
+        ("[env]\nphysics = {step_tol = 1e-10}\n", "step_tol must be at least"),
         ('[env]\naction = {kind = "pd", dt = 1e-9}\n', "pd_dt must be"),
     ],
 )

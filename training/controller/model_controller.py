@@ -460,9 +460,11 @@ def main(argv: list[str] | None = None) -> None:
     env = ConstrainedBipedEnv(
         preset=a.preset,
         dt=a.dt,
-        stop_at_switch=not a.hold,
-        start=a.start or "rest",
-        **({} if a.noise is None else {"reset_noise_scale": a.noise}),
+        physics={"stop_at_switch": not a.hold},
+        start={
+            "kind": a.start or "rest",
+            **({} if a.noise is None else {"reset_noise_scale": a.noise}),
+        },
     )
     ctl.params, ctl.options = env.params, env.options
     n = int(round(a.seconds / a.dt))

@@ -32,7 +32,7 @@ def record(
 
     Returns the arrays of :data:`biped_constraint_env.reference.FIELDS` and the period [s].
     """
-    env = ConstrainedBipedEnv(start=start, reset_noise_scale=0.0)
+    env = ConstrainedBipedEnv(start={"kind": start, "reset_noise_scale": 0.0})
     ctl = controller_from(teacher)
     obs, info = env.reset(seed=0)
     ctl.reset()

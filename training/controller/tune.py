@@ -122,7 +122,7 @@ def run_start(
     """
     from biped_constraint_env.env import ConstrainedBipedEnv
 
-    env = ConstrainedBipedEnv(dt=dt, stop_at_switch=True)
+    env = ConstrainedBipedEnv(dt=dt, physics={"stop_at_switch": True})
     ctl = ModelController(gains, env.params, env.options)
     if noise_nm > 0:
         rng = np.random.default_rng(noise_seed)

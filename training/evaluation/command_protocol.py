@@ -29,6 +29,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from biped_constraint_env.settings import with_keys
 from training.evaluation.rollouts import ENERGY_KEYS
 from training.evaluation.rollouts import energy as rollout_energy
 from training.evaluation.stats import MIN_STEPS, success
@@ -61,7 +62,7 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
 
     import biped_constraint_env  # noqa: F401
 
-    kw = {**env_kwargs, "time_limit_s": episode_s}
+    kw = with_keys(env_kwargs, "termination", time_limit_s=episode_s)
     venv = gym.make_vec(env_id, num_envs=len(seeds), vectorization_mode="vector_entry_point",
                         **kw)  # fmt: skip
     obs, info = venv.reset(seed=[int(s) for s in seeds])

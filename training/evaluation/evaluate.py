@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from biped_constraint_env.settings import with_keys
 from biped_constraint_env.tasks import EPISODE_S, MAX_DT_S, MIN_DT_S
 from training.evaluation.rollouts import (
     COMPARE_PUSH,
@@ -180,8 +181,8 @@ def _rest_rows(batch, cfg, seeds) -> tuple[list[dict], str]:
     from training.controller.model_controller import TEACHER
 
     spec = cfg.teacher if "+" in cfg.teacher else TEACHER  # a teacher with its start phase
-    kw = {**cfg.env_kwargs(), "start": "rest"}
-    noisy = {**kw, "reset_noise_scale": 3 * cfg.settings().start.reset_noise_scale}
+    kw = with_keys(cfg.env_kwargs(), "start", kind="rest")
+    noisy = with_keys(kw, "start", reset_noise_scale=3 * cfg.settings().start.reset_noise_scale)
     rows = []
     who = (("policy", lambda: batch), (f"model controller ({spec!r})",
            lambda: controller_batch(spec, len(seeds))))  # fmt: skip
@@ -197,7 +198,7 @@ def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> lis
     from training.controller.model_controller import controller_from
 
     kw = cfg.env_kwargs()
-    noisy = {**kw, "reset_noise_scale": 3 * cfg.settings().start.reset_noise_scale}
+    noisy = with_keys(kw, "start", reset_noise_scale=3 * cfg.settings().start.reset_noise_scale)
     pushed = {**kw, "perturbations": COMPARE_PUSH}
     what = f"push {COMPARE_PUSH['push_impulse_ns']} N s at {COMPARE_PUSH['push_at_s']} s"
     rows = [batched_row("policy, 3x reset noise", batch, noisy, seeds, cfg.env_id)]
@@ -297,11 +298,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     cfg = loop["cfg"]
     start = args.start or cfg.evaluation_start()
-    env = {**cfg.env, "start": start}
+    env = with_keys(cfg.env, "start", kind=start)
     if args.dt is not None:
         env["dt"] = args.dt
     if args.hold:
-        env["stop_at_switch"] = False
+        env = with_keys(env, "physics", stop_at_switch=False)
     cfg = replace(cfg, env=env)
     loop["cfg"] = cfg
     name = args.run_dir.resolve().name if args.run_dir else args.controller.replace(":", "_")

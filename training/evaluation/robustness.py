@@ -26,14 +26,16 @@ PUSH_WINDOW_S = (0.5, 10.0)
 
 
 def conditions(reset_noise: float) -> list[tuple[str, str, dict]]:
-    """(group, label, env kwargs on top of the evaluation's) of every condition."""
+    """(group, label, {part: its keys on top of the evaluation's}) of every condition."""
     out: list[tuple[str, str, dict]] = [("nominal", "nominal", {})]
     for p in PUSH_IMPULSES_NS:
         for sign, word in ((1, "forward"), (-1, "backward")):
             pert = {"push_impulse_ns": sign * p, "push_at_s": PUSH_WINDOW_S}
             out.append(("push", f"push {word} {p} N s", {"perturbations": pert}))
     for k in (3, 5):
-        out.append(("reset noise", f"reset noise {k}x", {"reset_noise_scale": k * reset_noise}))
+        out.append(
+            ("reset noise", f"reset noise {k}x", {"start": {"reset_noise_scale": k * reset_noise}})
+        )
     for m in (0.1, 0.2):
         pert = {"mass_scale": (1 - m, 1 + m)}
         out.append(("model", f"link masses ±{m:.0%}", {"perturbations": pert}))
@@ -51,14 +53,14 @@ def run(make_actor, env_kwargs: dict, seeds, env_id: str, label: str) -> list[di
     from training.evaluation.rollouts import batched_row
 
     rows = []
-    from biped_constraint_env.settings import make_settings
+    from biped_constraint_env.settings import make_settings, with_keys
 
     noise = make_settings(**env_kwargs).start.reset_noise_scale
     todo = conditions(noise)
     for k, (group, name, extra) in enumerate(todo, 1):
-        kw = {**env_kwargs, **extra}
-        if "perturbations" in extra and "perturbations" in env_kwargs:
-            kw["perturbations"] = {**env_kwargs["perturbations"], **extra["perturbations"]}
+        kw = env_kwargs
+        for part, keys in extra.items():  # each part's keys on top of the evaluation's
+            kw = with_keys(kw, part, **keys)
         row = batched_row(f"{label}, {name}", make_actor(), kw, seeds, env_id,
                           progress=f"[{k}/{len(todo)}] {name}")  # fmt: skip
         dv = [abs(v) for e in row["episodes"] for v in e.get("push_dv_m_s", [])]

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from biped_constraint_env.observation import OBS_FORCES
+from biped_constraint_env.settings import with_keys
 from training.evaluation.stats import format_success, success
 
 ENERGY_KEYS = ("motor_work_pos_j", "motor_work_abs_j", "damping_loss_j")
@@ -57,8 +58,9 @@ def _time_limit(env_kwargs: dict, episode_s: float | None) -> dict:
     if episode_s is None:
         from biped_constraint_env.tasks import MAX_EPISODE_STEPS
 
-        return {**env_kwargs, "time_limit_s": None, "max_episode_steps": MAX_EPISODE_STEPS}
-    return {**env_kwargs, "time_limit_s": episode_s}
+        return {**with_keys(env_kwargs, "termination", time_limit_s=None),
+                "max_episode_steps": MAX_EPISODE_STEPS}  # fmt: skip
+    return with_keys(env_kwargs, "termination", time_limit_s=episode_s)
 
 
 def run_episodes(

@@ -108,11 +108,11 @@ def run(
         task=cfg.task,
         preset=cfg.preset,
         dt=cfg.dt,
-        stop_at_switch=cfg.stop_at_switch,
-        reset_noise_scale=0.0,
+        physics={"stop_at_switch": cfg.stop_at_switch},
+        start={"reset_noise_scale": 0.0},
         render_mode="rgb_array" if (record_frames and cfg.gif) else None,
         max_episode_steps=cfg.max_periods,
-        time_limit_s=None,  # the scene's own limit: max_periods
+        termination={"time_limit_s": None},  # the scene's own limit: max_periods
     )
     obs, info = env.reset(seed=cfg.seed, options={"q": q0, "qd": qd0, "mode": cfg.mode})
     u = env.unwrapped

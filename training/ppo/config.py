@@ -14,6 +14,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from biped_constraint_env.settings import with_keys
+
 
 @dataclass
 class PPOConfig:
@@ -176,7 +178,7 @@ class PPOConfig:
 
         ``rsi`` is 0: a task's reference-state starts are for training.
         """
-        return {**self.env, "rsi": 0.0}
+        return with_keys(self.env, "start", rsi=0.0)
 
     def train_env_kwargs(self) -> dict:
         """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top."""

@@ -96,7 +96,9 @@ def make_sb3_vec_env(
     from biped_constraint_env.tasks import MAX_EPISODE_STEPS
 
     limit_kw = {"max_episode_steps": max_episode_steps or MAX_EPISODE_STEPS}
-    env_kwargs = {"time_limit_s": None, **env_kwargs}
+    # episodes end by the training env's own limit, in periods, unless the termination sets one
+    termination = {"time_limit_s": None, **(env_kwargs.get("termination") or {})}
+    env_kwargs = {**env_kwargs, "termination": termination}
     if vec == "batched":
         from gymnasium.vector import AutoresetMode
 
