@@ -46,6 +46,7 @@ from .state import (
     STATUS_NONFINITE,
     STATUS_TERMINATED,
 )
+from .terminations import terminations
 from .tracking import Tracking
 
 BASE_INFO_KEYS = ("mode", "stance_side", "steps_completed", "t", "hip_y", "root_y", "switches",
@@ -105,15 +106,18 @@ class EnvCore:
         self.command_reward = (CommandReward(s.reward, p.dt, n) if s.reward.kind == "command"
                                else None)  # fmt: skip
         self.reward = REWARD_PARTS[s.reward.kind]()
-        self.terminations = [] if s.max_model_time_s is None else [self._held_too_long]
-        self._pd = a.pd
-        self._pushes = s.perturbations.push_impulse_ns is not None
-        self._noisy = s.perturbations.obs_noise is not None
+        self.terminations = terminations(self)
+        # the parts this env has, chosen once here: what runs before a period, after it, in
+        # the observation and in ``info`` (the methods below only run the lists)
+        self._before = self._before_hooks()
+        self._after = self._after_hooks()
+        self._blocks = self._observation_blocks()
+        self._post_obs = [self.perturb.observe] if s.perturbations.obs_noise is not None else []
+        self._extras = self._info_extras()
         self.reward_keys = s.reward.info_keys
-        self.info_keys = BASE_INFO_KEYS + self.reward_keys + (
-            (("torque",) if a.pd else ()) + (("push_impulse_ns", "push_dv_m_s")
-                                             if self._pushes else ())
-            + (("command_m_s",) if self.commands is not None else ()))  # fmt: skip
+        self.info_keys = (
+            BASE_INFO_KEYS + self.reward_keys + tuple(k for keys, _ in self._extras for k in keys)
+        )
         self._terms = np.zeros((n, len(self.reward_keys)))
         self._reasons = np.full(n, None, dtype=object)
         self._any_reason = False
@@ -179,18 +183,93 @@ class EnvCore:
         self._set_reasons(terminated)
         return rewards, terminated
 
-    def _before_period(self, actions: np.ndarray, rngs, skip) -> np.ndarray:
-        """The PD targets' bases (when they follow the clock), pushes and delayed actions."""
-        buf, sim = self.buf, self.sim
-        if self._pd_follows:  # the targets' bases at the clocks and models (new starts too)
+    # ------------------------------------------------------------------ the parts' hooks
+    def _rows(self, skip) -> range | np.ndarray:
+        """The rows a period steps (all but ``skip``)."""
+        return range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
+
+    def _before_hooks(self) -> list:
+        """What runs before a period, in order: fn(actions, rngs, skip) -> actions."""
+        hooks, buf, sim = [], self.buf, self.sim
+
+        def pd_bases(actions, rngs, skip):  # the targets' bases at the clocks and models
             buf.tgt[:], buf.rate[:] = self.tracking.bases(sim.ist[:, ST_MODE])
-        if self.perturb.active or self.commands is not None:
-            rows = range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
-            if self.perturb.active:  # pushes due now (stepped rows); the delayed actions
-                actions = self.perturb.before_period(actions.astype(np.float64), rngs, rows)
-            if self.commands is not None:  # commands due for resampling
-                self.commands.before_period(sim.fst[:, FS_T], rngs, rows)
-        buf.act[:] = actions
+            return actions
+
+        def perturb(actions, rngs, skip):  # pushes due now (stepped rows); delayed actions
+            return self.perturb.before_period(actions.astype(np.float64), rngs, self._rows(skip))
+
+        def commands(actions, rngs, skip):  # commands due for resampling
+            self.commands.before_period(sim.fst[:, FS_T], rngs, self._rows(skip))
+            return actions
+
+        if self._pd_follows:
+            hooks.append(pd_bases)
+        if self.perturb.active:
+            hooks.append(perturb)
+        if self.commands is not None:
+            hooks.append(commands)
+        return hooks
+
+    def _after_hooks(self) -> list:
+        """What runs after the compiled period, in order: fn(stepped) (None: every row)."""
+        hooks, sim = [], self.sim
+        if self.clock is not None:
+            hooks.append(
+                lambda stepped: self.clock.advance(
+                    sim.ist[:, ST_MODE], sim.ist[:, ST_STEPS], stepped
+                )
+            )
+            if self.tracking is not None:
+                hooks.append(lambda stepped: self.tracking.after_period(sim.ist[:, ST_STEPS]))
+        return hooks  # fmt: skip
+
+    def _observation_blocks(self) -> list:
+        """The observation's blocks after the base entries: fn() -> (n, k), in order."""
+        blocks = []
+        if self.settings.observation.phase_obs:
+            blocks.append(lambda: self.clock.features())
+        if self.commands is not None:
+            blocks.append(lambda: self.commands.features())
+        return blocks
+
+    def _info_extras(self) -> list:
+        """``info`` entries of the parts: (keys, fn(row) -> values), in order."""
+        extras = []
+        if self.settings.action.pd:  # the period's time-mean PD torque
+            extras.append(
+                (
+                    ("torque",),
+                    lambda row: (
+                        self.buf.act[row].copy() if row is not None else self.buf.act.copy(),
+                    ),
+                )
+            )
+        if self.settings.perturbations.push_impulse_ns is not None:
+            p = self.perturb
+            extras.append(
+                (
+                    ("push_impulse_ns", "push_dv_m_s"),
+                    lambda row: (
+                        (p.push_ns.item(row), p.push_dv.item(row))
+                        if row is not None
+                        else (p.push_ns.copy(), p.push_dv.copy())
+                    ),
+                )
+            )
+        if self.commands is not None:  # the command the next period runs under
+            c = self.commands
+            extras.append(
+                (("command_m_s",), lambda row: (c.v.item(row) if row is not None else c.v.copy(),))
+            )
+        return extras  # fmt: skip
+
+    # ------------------------------------------------------------------ the period, in steps
+    def _before_period(self, actions: np.ndarray, rngs, skip) -> np.ndarray:
+        """The parts' hooks before the period (PD bases, pushes, delays, commands)."""
+        for hook in self._before:
+            actions = hook(actions, rngs, skip)
+        self.buf.act[:] = actions
         return actions
 
     def _run(self, actions: np.ndarray, skip) -> None:
@@ -201,17 +280,14 @@ class EnvCore:
         if buf.period():
             validate_actions(actions, a.bound, a.out_of_range, a.bound_name)
             raise AssertionError(f"the compiled action check refused {actions}, Python not")
+        stepped = None
         if skip is not None:
             sim.status[skip] = 0
             sim.n_events[skip] = 0
-        if self.clock is not None:
-            stepped = None
-            if skip is not None:
-                stepped = np.ones(self.n, bool)
-                stepped[skip] = False
-            self.clock.advance(sim.ist[:, ST_MODE], sim.ist[:, ST_STEPS], stepped)
-            if self.tracking is not None:
-                self.tracking.after_period(sim.ist[:, ST_STEPS])
+            stepped = np.ones(self.n, bool)
+            stepped[skip] = False
+        for hook in self._after:
+            hook(stepped)
 
     def _terminated(self, skip) -> np.ndarray:
         """The rows the period ended: an out-of-model event or a fall, then :attr:`terminations`."""
@@ -224,18 +300,6 @@ class EnvCore:
         for ends in self.terminations:
             ends(terminated, skip)
         return terminated
-
-    def _held_too_long(self, terminated: np.ndarray, skip) -> None:
-        """Early termination (``max_model_time_s``): a contact phase held too long.
-
-        With a command, only while it is not zero (standing holds a contact phase).
-        """
-        held = self.clock.model_time_s() > self.settings.max_model_time_s + 1e-9
-        if self.commands is not None:
-            held &= self.commands.v != 0.0
-        if skip is not None:
-            held[skip] = False
-        terminated |= held
 
     def _set_reasons(self, terminated: np.ndarray) -> None:
         """The termination reason of every row (None where it goes on)."""
@@ -274,15 +338,10 @@ class EnvCore:
         ``rows`` (default all).
         """
         obs = self.buf.obs
-        if self.clock is not None or self.commands is not None:
-            parts = [obs]
-            if self.settings.observation.phase_obs:
-                parts.append(self.clock.features())
-            if self.commands is not None:
-                parts.append(self.commands.features())
-            obs = np.concatenate(parts, axis=1) if len(parts) > 1 else obs
-        if self._noisy:
-            obs = self.perturb.observe(obs, rngs, range(self.n) if rows is None else rows)
+        if self._blocks:
+            obs = np.concatenate([obs, *(block() for block in self._blocks)], axis=1)
+        for post in self._post_obs:  # sensor noise
+            obs = post(obs, rngs, range(self.n) if rows is None else rows)
         return obs.copy() if obs is self.buf.obs else obs
 
     def info(self, row: int | None = None) -> dict[str, Any]:
@@ -322,12 +381,6 @@ class EnvCore:
                    "motor_work_abs_j": sim.fst[:, FS_WORK_ABS].copy(),
                    "damping_loss_j": sim.fst[:, FS_DAMPED].copy()}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms.T.copy(), strict=True))
-        if self._pd:  # the period's time-mean PD torque
-            out["torque"] = self.buf.act[row].copy() if one else self.buf.act.copy()
-        if self._pushes:
-            p = self.perturb
-            out["push_impulse_ns"] = p.push_ns.item(row) if one else p.push_ns.copy()
-            out["push_dv_m_s"] = p.push_dv.item(row) if one else p.push_dv.copy()
-        if self.commands is not None:  # the command the next period runs under
-            out["command_m_s"] = self.commands.v.item(row) if one else self.commands.v.copy()
+        for keys, values in self._extras:
+            out.update(zip(keys, values(row), strict=True))
         return out

@@ -1,7 +1,8 @@
 """One direction of dependency: jit (how the core is compiled) and validation (argument
 checks) -> model -> kinematics -> dynamics -> contact -> modes -> hybrid -> the simulator
 (state -> options -> stepper -> advance -> simulator, its Python API) -> the env's parts
-(tasks, actions, starts, rewards, gait, command, observation, reference, perturbations) ->
+(tasks, actions, starts, rewards, gait, command, observation, reference, perturbations,
+terminations) ->
 settings (all the env's arguments, validated once) -> tracking -> period (the compiled control
 period) -> core (N rows around it: starts, reasons, rewards, info) -> env (its one-row case) ->
 vector_env.
@@ -43,6 +44,7 @@ LAYERS = [
     "observation",
     "reference",
     "perturbations",
+    "terminations",
     "settings",
     "tracking",
     "period",
@@ -70,6 +72,26 @@ def test_no_upward_imports(module):
     rank = LAYERS.index(module)
     for dep in _imports(PKG / f"{module}.py"):
         assert LAYERS.index(dep) <= rank, f"{module} imports upward from {dep}"
+
+
+def test_the_core_period_only_sequences_its_parts():
+    """EnvCore.period: at most 25 lines and 3 branches; the hooks it runs are lists built once
+    from the settings, so no period step reads a feature switch."""
+    tree = ast.parse((PKG / "core.py").read_text())
+    core = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "EnvCore")
+    methods = {f.name: f for f in core.body if isinstance(f, ast.FunctionDef)}
+    branches = (ast.If, ast.For, ast.While, ast.IfExp, ast.Try, ast.Match)
+    period = methods["period"]
+    assert period.end_lineno - period.lineno + 1 <= 25
+    assert sum(isinstance(n, branches) for n in ast.walk(period)) <= 3
+    for name in ("_before_period", "observation"):  # each runs its part list, no switch
+        ifs = [n for n in ast.walk(methods[name]) if isinstance(n, ast.If)]
+        assert ifs == [] or all(
+            "skip" in ast.unparse(n.test)
+            or "rows" in ast.unparse(n.test)
+            or "_blocks" in ast.unparse(n.test)
+            for n in ifs
+        ), name
 
 
 def test_core_never_imports_gymnasium():
