@@ -11,13 +11,15 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .jit import njit_noalloc
-from .model import N_ACTUATED
-from .validation import check_choice, check_real
+from .model import N_ACTUATED, N_LINKS
+from .modes import N_MODELS
+from .validation import check_array, check_choice, check_mapping, check_real
 
 TORQUE_LIMIT_NM = 150.0
 """Default action bound [N m] (>= 120 so that Table 2 fits)."""
@@ -168,3 +170,213 @@ def nb_check_torques(ACT, acfg) -> int:
                     return 1
                 ACT[i, j] = min(max(x, -limit), limit)
     return 0
+
+
+# ----------------------------------------------------------------------------- settings
+PD_RANGE_RAD = 1.0
+"""Default half-range of the PD targets around their base [rad] (``action["range"]``)."""
+PD_RANGE_MAX_RAD = 3.0
+PD_OFFSET_MAX_RAD = 1.0
+"""Bound of each ``action["offset"]`` entry [rad]."""
+PD_GAIN_SCALE_MAX = 100.0
+PD_FIXED_POSE_RAD = (-0.1, 0.1, -0.3, -0.4, 0.7)
+"""The default ``action["pose"]`` of ``around="fixed"``: q1..q5 of the Fig. 2 rest posture."""
+ACTION_KINDS = ("torque", "pd")
+PD_AROUND = ("fixed", "reference")
+PD_KEYS = ("kind", "around", "range", "pose", "offset", "gain_scale", "dt")
+"""The ``action`` dict's PD keys (all but ``kind`` are the PD mapping's)."""
+ACTION_KEYS = PD_KEYS + ("torque_limit_nm", "out_of_range")
+"""Keys of the ``action`` dict: the kind, the torque limit [N m] and what an out-of-range action
+does (every kind), and the PD mapping's."""
+
+
+@dataclass(frozen=True)
+class ActionSettings:
+    """The action mapping: torques [N m], or PD targets in [-1, 1]^5 about a base.
+
+    PD targets ``base + offset + range * a`` hold over the control period; the law
+    ``Kp (target - q) + Kd (rate - q-dot)`` (``PD_KP`` x ``gain_scale``, ``PD_KD`` x its
+    square root), clipped to ``torque_limit_nm``, runs ``pd_substeps`` times in it.
+    """
+
+    kind: str
+    torque_limit_nm: float
+    out_of_range: str
+    around: str = "fixed"
+    range: float = PD_RANGE_RAD
+    pose: tuple[float, ...] = PD_FIXED_POSE_RAD
+    offset: tuple[tuple[float, ...], ...] = ((0.0,) * N_ACTUATED,) * N_MODELS
+    gain_scale: float = 1.0
+    pd_substeps: int = 0
+
+    @property
+    def pd(self) -> bool:
+        """Whether the actions are PD targets."""
+        return self.kind == "pd"
+
+    @property
+    def unit_actions(self) -> bool:
+        """Whether an action is a point of [-1, 1]^5 that the env maps (PD targets)."""
+        return self.pd
+
+    @property
+    def needs_reference(self) -> bool:
+        """Whether the mapping reads the reference walk (PD targets about its pose)."""
+        return self.pd and self.around == "reference"
+
+    @property
+    def bases_vary(self) -> bool:
+        """Whether the PD targets' bases change in an episode (set before every period).
+
+        They do about the reference, or with offsets that differ between the models.
+        """
+        return self.pd and (self.around == "reference" or self.offset_by_model)
+
+    def in_the_loop(self) -> str:
+        """What acts at run time with this mapping, after the network."""
+        if self.needs_reference:
+            return "network + PD about the reference pose at the contact clock"
+        return (
+            "network alone (PD targets about a fixed pose)"
+            if self.pd
+            else "network alone (torques)"
+        )
+
+    @property
+    def offset_by_model(self) -> bool:
+        """Whether the targets' offset differs between the models."""
+        return len(set(self.offset)) > 1
+
+    @property
+    def bound(self) -> float:
+        """The action space's bound: 1 for PD targets, the torque limit for torques."""
+        return 1.0 if self.pd else self.torque_limit_nm
+
+    @property
+    def bound_name(self) -> str:
+        """The bound's name in error messages."""
+        return PD_BOUND if self.pd else "torque limit"
+
+    @property
+    def kp(self) -> np.ndarray:
+        """The proportional gains [N m / rad]."""
+        return PD_KP * self.gain_scale
+
+    @property
+    def kd(self) -> np.ndarray:
+        """The derivative gains [N m s / rad]."""
+        return PD_KD * np.sqrt(self.gain_scale)
+
+
+def action_settings(spec: Any, task_spec: Any, dt: float) -> ActionSettings:
+    """The ``action`` kwarg (a kind, or a dict of :data:`ACTION_KEYS`) on top of the task's."""
+
+    def as_dict(x):
+        return {"kind": x} if isinstance(x, str) else dict(check_mapping("action", x, ACTION_KEYS))
+
+    task = as_dict(task_spec)
+    given = {} if spec is None else as_dict(spec)
+    kind = check_choice("action kind", given.get("kind", task.get("kind", "torque")), ACTION_KINDS)
+    merged = {**(task if task.get("kind", "torque") == kind else {}), **given, "kind": kind}
+    limit, out_of_range = check_action_settings(merged.get("torque_limit_nm", TORQUE_LIMIT_NM),
+                                                merged.get("out_of_range", "clip"))  # fmt: skip
+    if kind == "torque":
+        extra = sorted(set(given) - {"kind", "torque_limit_nm", "out_of_range"})
+        if extra:
+            raise ValueError(f"action: {extra} are PD settings; torque actions take none")
+        return ActionSettings("torque", limit, out_of_range)
+    pose = merged.get("pose")
+    offset = merged.get("offset")
+    scale = check_real("action gain_scale", merged.get("gain_scale", 1.0), 0.0,
+                       PD_GAIN_SCALE_MAX, low_open=True)  # fmt: skip
+    return ActionSettings(
+        kind="pd",
+        torque_limit_nm=limit,
+        out_of_range=out_of_range,
+        around=check_choice("action around", merged.get("around", "fixed"), PD_AROUND),
+        range=check_real(
+            "action range",
+            merged.get("range", PD_RANGE_RAD),
+            0.0,
+            PD_RANGE_MAX_RAD,
+            low_open=True,
+            unit=" [rad]",
+        ),  # fmt: skip
+        pose=PD_FIXED_POSE_RAD
+        if pose is None
+        else tuple(check_array("action pose", pose, (N_ACTUATED,), np.pi, " [rad]").tolist()),
+        offset=_offsets(offset),
+        gain_scale=scale,
+        pd_substeps=check_pd_dt(merged.get("dt"), dt),
+    )
+
+
+def _offsets(offset: Any) -> tuple[tuple[float, ...], ...]:
+    """``action["offset"]``: q1..q5 [rad] in every model, or one row per model (4 x 5)."""
+    if offset is None:
+        return ((0.0,) * N_ACTUATED,) * N_MODELS
+    try:
+        nested = np.ndim(offset) == 2
+    except ValueError:  # ragged: check_array names it
+        nested = False
+    shape = (N_MODELS, N_ACTUATED) if nested else (N_ACTUATED,)
+    rows = check_array("action offset", offset, shape, PD_OFFSET_MAX_RAD, " [rad]")
+    rows = np.broadcast_to(rows, (N_MODELS, N_ACTUATED))
+    return tuple(tuple(r.tolist()) for r in rows)
+
+
+# ----------------------------------------------------------------------------- the part
+class ActionPart:
+    """The action mapping of N rows in the core (its kind read here only).
+
+    The compiled period's config, and for PD targets their bases (set once about a fixed
+    pose, or before every period about the reference at the clock), ``info["torque"]`` and
+    a cleared action at reset.
+
+    ``reference``: the rows' reference lookup (:class:`~.tracking.Tracking`: ``rows()``, the
+    reference at each row's clock), needed only about the reference.
+    """
+
+    def __init__(self, action: ActionSettings, n: int, reference=None):
+        """For the validated ``action`` and ``n`` rows."""
+        self.action, self.reference = action, reference
+        self._offset = np.array(action.offset, dtype=np.float64)  # (4, 5), by model
+        self.pcfg = (pd_config(action.pd_substeps, action.torque_limit_nm, action.range,
+                               action.kp, action.kd) if action.pd else TORQUE_ACTIONS)  # fmt: skip
+        self.info_keys = ("torque",) if action.pd else ()
+
+    def bases(self, modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 5) bases of the PD targets [rad] and their rates [rad/s] of rows in ``modes``.
+
+        The fixed pose plus the offset of the row's model (rates 0), or the reference's pose
+        at the clock plus that offset (its rates); an action a sets the targets base +
+        ``range`` x a, and the compiled period applies the PD law to them.
+        """
+        offset = self._offset[np.asarray(modes) - 1]
+        if self.action.around == "reference":
+            rows = self.reference.rows()
+            return rows[:, 1:N_LINKS] + offset, rows[:, N_LINKS + 1 : 2 * N_LINKS]
+        return np.array(self.action.pose) + offset, np.zeros((len(offset), N_ACTUATED))
+
+    def hooks(self, buf, sim_modes) -> list:
+        """Before-period hooks: the bases where they vary (set once here where they do not)."""
+        if not self.action.pd:
+            return []
+        if not self.action.bases_vary:  # constant bases about a fixed pose: set once
+            buf.tgt[:], buf.rate[:] = self.bases(np.ones(buf.tgt.shape[0], np.int64))
+            return []
+
+        def pd_bases(actions, rngs, skip):  # the targets' bases at the clocks and models
+            buf.tgt[:], buf.rate[:] = self.bases(sim_modes())
+            return actions
+
+        return [pd_bases]
+
+    def info(self, buf, row):
+        """``info`` values of :attr:`info_keys`: the period's time-mean PD torque."""
+        return (buf.act[row].copy() if row is not None else buf.act.copy(),)
+
+    def clear(self, buf) -> None:
+        """After a reset: no torque of a period yet (PD targets' ``info["torque"]``)."""
+        if self.action.pd:
+            buf.act[:] = 0.0

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .actions import TORQUE_ACTIONS, action_config, validate_actions
+from .actions import ActionPart, action_config, validate_actions
 from .clock import ContactClock
 from .command import CommandReward, Commands
 from .gait import GaitReward
@@ -87,19 +87,17 @@ class EnvCore:
         self.settings, self.n = s, n
         self.observation_space = observation_space(s.observation.phase_obs, s.command is not None)
         self.clock = ContactClock(n, p.dt) if s.needs_clock else None
-        self.tracking = Tracking(n, s, self.clock) if (s.needs_reference or a.pd) else None
+        self.tracking = Tracking(n, s, self.clock) if s.needs_reference else None
+        self.action_part = ActionPart(a, n, self.tracking)
         env_weights = (s.reward.weights if s.reward.kind == "env"
                        else tuple(t.weight for t in REWARD_KINDS["env"]))  # fmt: skip
         self.buf = EnvBuffers(
             n, p.params, p.options, p.dt,
             reward_config(env_weights, a.torque_limit_nm, s.fall_hip_height_m),
             action_config(a.bound, a.out_of_range), num_threads,
-            pcfg=self.tracking.pd_config() if a.pd else TORQUE_ACTIONS,
+            pcfg=self.action_part.pcfg,
         )  # fmt: skip
         self.sim, self.hip = self.buf.sim, self.buf.hip
-        self._pd_follows = a.pd and self.tracking.pd_bases_vary
-        if a.pd and not self._pd_follows:  # constant bases about a fixed pose: set once
-            self.buf.tgt[:], self.buf.rate[:] = self.tracking.bases(np.ones(n, np.int64))
         self.perturb = Perturbations(n, s.perturbations, p.params, self.buf)
         self.gait = GaitReward(s.reward, p.dt, n) if s.reward.kind == "gait" else None
         self.commands = None if s.command is None else Commands(n, s.command)
@@ -190,11 +188,8 @@ class EnvCore:
 
     def _before_hooks(self) -> list:
         """What runs before a period, in order: fn(actions, rngs, skip) -> actions."""
-        hooks, buf, sim = [], self.buf, self.sim
-
-        def pd_bases(actions, rngs, skip):  # the targets' bases at the clocks and models
-            buf.tgt[:], buf.rate[:] = self.tracking.bases(sim.ist[:, ST_MODE])
-            return actions
+        sim = self.sim
+        hooks = self.action_part.hooks(self.buf, lambda: sim.ist[:, ST_MODE])
 
         def perturb(actions, rngs, skip):  # pushes due now (stepped rows); delayed actions
             return self.perturb.before_period(actions.astype(np.float64), rngs, self._rows(skip))
@@ -203,8 +198,6 @@ class EnvCore:
             self.commands.before_period(sim.fst[:, FS_T], rngs, self._rows(skip))
             return actions
 
-        if self._pd_follows:
-            hooks.append(pd_bases)
         if self.perturb.active:
             hooks.append(perturb)
         if self.commands is not None:
@@ -236,15 +229,9 @@ class EnvCore:
     def _info_extras(self) -> list:
         """``info`` entries of the parts: (keys, fn(row) -> values), in order."""
         extras = []
-        if self.settings.action.pd:  # the period's time-mean PD torque
-            extras.append(
-                (
-                    ("torque",),
-                    lambda row: (
-                        self.buf.act[row].copy() if row is not None else self.buf.act.copy(),
-                    ),
-                )
-            )
+        part = self.action_part
+        if part.info_keys:  # the period's time-mean PD torque
+            extras.append((part.info_keys, lambda row: part.info(self.buf, row)))
         if self.settings.perturbations.push_impulse_ns is not None:
             p = self.perturb
             extras.append(
@@ -327,8 +314,7 @@ class EnvCore:
         self._any_reason = False
         self.perturb.push_ns[:] = 0.0
         self.perturb.push_dv[:] = 0.0
-        if self.settings.action.pd:
-            self.buf.act[:] = 0.0
+        self.action_part.clear(self.buf)
 
     # ------------------------------------------------------------------ observation, info
     def observation(self, rngs, rows=None) -> np.ndarray:

@@ -9,7 +9,7 @@ the perturbations (:mod:`.perturbations`). ``repr(settings)`` prints them and
 
 One keyword argument per part, each a name or a dict of that part's settings:
 ``physics`` (the integrator options: :data:`PHYSICS_KEYS`, on top of ``preset``), ``action``
-(:data:`ACTION_KEYS`), ``start`` (a start's name, a dict of component weights, or
+(:data:`~.actions.ACTION_KEYS`), ``start`` (a start's name, a dict of component weights, or
 :data:`START_KEYS`), ``reward`` (a kind's name or ``{"kind", "weights", "kernels", ...}``),
 ``termination`` (:data:`TERMINATION_KEYS`), ``observation`` (a list of
 :data:`OBSERVATION_BLOCKS`), ``perturbations`` and ``command``; besides them ``task``, ``preset``,
@@ -26,17 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from .actions import (
-    PD_BOUND,
-    PD_KD,
-    PD_KP,
-    TORQUE_LIMIT_NM,
-    check_action_settings,
-    check_pd_dt,
-)
+from .actions import ActionSettings, action_settings
 from .command import CommandSettings, command_settings
-from .model import N_ACTUATED, BipedParams, paper_biped
-from .modes import N_MODELS
+from .model import BipedParams, paper_biped
 from .options import SimOptions
 from .perturbations import PerturbationSettings, perturbation_settings
 from .reference import OWN_REFERENCE, REFERENCES
@@ -49,28 +41,12 @@ from .starts import (
 )
 from .tasks import EPISODE_S, MAX_EPISODE_S, TASKS, resolve_options, resolve_task
 from .validation import (
-    check_array,
     check_choice,
     check_mapping,
     check_names,
     check_real,
 )
 
-PD_RANGE_RAD = 1.0
-"""Default half-range of the PD targets around their base [rad] (``action["range"]``)."""
-PD_RANGE_MAX_RAD = 3.0
-PD_OFFSET_MAX_RAD = 1.0
-"""Bound of each ``action["offset"]`` entry [rad]."""
-PD_GAIN_SCALE_MAX = 100.0
-PD_FIXED_POSE_RAD = (-0.1, 0.1, -0.3, -0.4, 0.7)
-"""The default ``action["pose"]`` of ``around="fixed"``: q1..q5 of the Fig. 2 rest posture."""
-ACTION_KINDS = ("torque", "pd")
-PD_AROUND = ("fixed", "reference")
-PD_KEYS = ("kind", "around", "range", "pose", "offset", "gain_scale", "dt")
-"""The ``action`` dict's PD keys (all but ``kind`` are the PD mapping's)."""
-ACTION_KEYS = PD_KEYS + ("torque_limit_nm", "out_of_range")
-"""Keys of the ``action`` dict: the kind, the torque limit [N m] and what an out-of-range action
-does (every kind), and the PD mapping's."""
 PHYSICS_KEYS = ("integrator", "substeps", "impact", "locate_events", "jdot", "strict",
                 "heel_force_includes_foot_weight", "step_tol", "stop_at_switch")  # fmt: skip
 """Keys of the ``physics`` dict: :class:`~.options.SimOptions` overrides on top of the preset."""
@@ -106,56 +82,6 @@ class StartSettings:
     posture: tuple[float, ...]
     reset_noise_scale: float
     rsi: float
-
-
-@dataclass(frozen=True)
-class ActionSettings:
-    """The action mapping: torques [N m], or PD targets in [-1, 1]^5 about a base.
-
-    PD targets ``base + offset + range * a`` hold over the control period; the law
-    ``Kp (target - q) + Kd (rate - q-dot)`` (``PD_KP`` x ``gain_scale``, ``PD_KD`` x its
-    square root), clipped to ``torque_limit_nm``, runs ``pd_substeps`` times in it.
-    """
-
-    kind: str
-    torque_limit_nm: float
-    out_of_range: str
-    around: str = "fixed"
-    range: float = PD_RANGE_RAD
-    pose: tuple[float, ...] = PD_FIXED_POSE_RAD
-    offset: tuple[tuple[float, ...], ...] = ((0.0,) * N_ACTUATED,) * N_MODELS
-    gain_scale: float = 1.0
-    pd_substeps: int = 0
-
-    @property
-    def pd(self) -> bool:
-        """Whether the actions are PD targets."""
-        return self.kind == "pd"
-
-    @property
-    def offset_by_model(self) -> bool:
-        """Whether the targets' offset differs between the models."""
-        return len(set(self.offset)) > 1
-
-    @property
-    def bound(self) -> float:
-        """The action space's bound: 1 for PD targets, the torque limit for torques."""
-        return 1.0 if self.pd else self.torque_limit_nm
-
-    @property
-    def bound_name(self) -> str:
-        """The bound's name in error messages."""
-        return PD_BOUND if self.pd else "torque limit"
-
-    @property
-    def kp(self) -> np.ndarray:
-        """The proportional gains [N m / rad]."""
-        return PD_KP * self.gain_scale
-
-    @property
-    def kd(self) -> np.ndarray:
-        """The derivative gains [N m s / rad]."""
-        return PD_KD * np.sqrt(self.gain_scale)
 
 
 @dataclass(frozen=True)
@@ -218,11 +144,7 @@ class EnvSettings:
     @property
     def needs_reference(self) -> bool:
         """Whether an option reads the reference walk (reward, starts, observation, PD base)."""
-        return (
-            self.reward.kind == "tracking"
-            or self.start.rsi > 0
-            or (self.action.pd and self.action.around == "reference")
-        )
+        return self.reward.kind == "tracking" or self.start.rsi > 0 or self.action.needs_reference
 
     @property
     def needs_clock(self) -> bool:
@@ -257,63 +179,6 @@ class EnvSettings:
             f.name: plain(getattr(self.command, f.name)) for f in dataclasses.fields(self.command)
         }  # fmt: skip
         return out
-
-
-def _action_settings(spec: Any, task_spec: Any, dt: float) -> ActionSettings:
-    """The ``action`` kwarg (a kind, or a dict of :data:`ACTION_KEYS`) on top of the task's."""
-
-    def as_dict(x):
-        return {"kind": x} if isinstance(x, str) else dict(check_mapping("action", x, ACTION_KEYS))
-
-    task = as_dict(task_spec)
-    given = {} if spec is None else as_dict(spec)
-    kind = check_choice("action kind", given.get("kind", task.get("kind", "torque")), ACTION_KINDS)
-    merged = {**(task if task.get("kind", "torque") == kind else {}), **given, "kind": kind}
-    limit, out_of_range = check_action_settings(merged.get("torque_limit_nm", TORQUE_LIMIT_NM),
-                                                merged.get("out_of_range", "clip"))  # fmt: skip
-    if kind == "torque":
-        extra = sorted(set(given) - {"kind", "torque_limit_nm", "out_of_range"})
-        if extra:
-            raise ValueError(f"action: {extra} are PD settings; torque actions take none")
-        return ActionSettings("torque", limit, out_of_range)
-    pose = merged.get("pose")
-    offset = merged.get("offset")
-    scale = check_real("action gain_scale", merged.get("gain_scale", 1.0), 0.0,
-                       PD_GAIN_SCALE_MAX, low_open=True)  # fmt: skip
-    return ActionSettings(
-        kind="pd",
-        torque_limit_nm=limit,
-        out_of_range=out_of_range,
-        around=check_choice("action around", merged.get("around", "fixed"), PD_AROUND),
-        range=check_real(
-            "action range",
-            merged.get("range", PD_RANGE_RAD),
-            0.0,
-            PD_RANGE_MAX_RAD,
-            low_open=True,
-            unit=" [rad]",
-        ),  # fmt: skip
-        pose=PD_FIXED_POSE_RAD
-        if pose is None
-        else tuple(check_array("action pose", pose, (N_ACTUATED,), np.pi, " [rad]").tolist()),
-        offset=_offsets(offset),
-        gain_scale=scale,
-        pd_substeps=check_pd_dt(merged.get("dt"), dt),
-    )
-
-
-def _offsets(offset: Any) -> tuple[tuple[float, ...], ...]:
-    """``action["offset"]``: q1..q5 [rad] in every model, or one row per model (4 x 5)."""
-    if offset is None:
-        return ((0.0,) * N_ACTUATED,) * N_MODELS
-    try:
-        nested = np.ndim(offset) == 2
-    except ValueError:  # ragged: check_array names it
-        nested = False
-    shape = (N_MODELS, N_ACTUATED) if nested else (N_ACTUATED,)
-    rows = check_array("action offset", offset, shape, PD_OFFSET_MAX_RAD, " [rad]")
-    rows = np.broadcast_to(rows, (N_MODELS, N_ACTUATED))
-    return tuple(tuple(r.tolist()) for r in rows)
 
 
 def _with_kind(spec: Any, task_reward: str | dict) -> Any:
@@ -455,7 +320,7 @@ def make_settings(
             noise,
             check_real("start rsi", st.get("rsi", 0.0), 0.0, 1.0),
         ),  # fmt: skip
-        action=_action_settings(action, task_t.get("action", "torque"), dt),
+        action=action_settings(action, task_t.get("action", "torque"), dt),
         reward=reward_s,
         observation=_observation(t["observation"]),
         perturbations=perturbation_settings(perturbations),

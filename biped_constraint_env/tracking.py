@@ -22,7 +22,7 @@ phase. The default env uses none of it.
   (``around="fixed"``, the default: no reference at run time) or the reference's q at the
   clock (``around="reference"``), plus a constant ``offset`` [rad] (as legged-robot RL's
   default joint offsets); the PD law runs at every physics step while the targets hold over
-  the period (:mod:`.actions`, :class:`~.settings.ActionSettings`).
+  the period (:mod:`.actions`, :class:`~.actions.ActionSettings`).
 
 Clock: the reference's first step (its recording's first step from its own start) serves the
 starts of the same kind, until their first step completes: a start at rest with the rest
@@ -36,10 +36,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .actions import pd_config
 from .clock import ContactClock
 from .hybrid import wrap_angles
-from .model import N_ACTUATED, N_LINKS
+from .model import N_LINKS
 from .reference import (
     HIP_VY,
     HIP_Z,
@@ -70,8 +69,6 @@ class Tracking:
     def __init__(self, n: int, settings: EnvSettings, clock: ContactClock | None):
         """Load the reference (when an option needs it) and index its phase tables."""
         self.settings = settings
-        self.action = settings.action
-        self._pd_offset = np.array(settings.action.offset, dtype=np.float64)  # (4, 5), by model
         self.clock = clock
         self.refs: list[Reference] = []
         self.which = np.zeros(n, np.int64)  # each env's reference (an index into refs)
@@ -211,34 +208,6 @@ class Tracking:
                 table = self._rows[o : o + n, :N_LINKS]
                 d = np.sum((sim.q[slots][:, None, :] - table[None, :, :]) ** 2, axis=2)
                 c.j[slots] = self._env_periods(np.argmin(d, axis=1))
-
-    # ------------------------------------------------------------------ actions
-    def bases(self, modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 5) bases of the PD targets [rad] and their rates [rad/s] of envs in ``modes``.
-
-        The fixed pose plus the offset of the env's model (rates 0), or the reference's pose
-        at the clock plus that offset (its rates); an action a sets the targets base +
-        ``range`` x a, and the compiled period applies the PD law to them (:mod:`.actions`).
-        """
-        offset = self._pd_offset[np.asarray(modes) - 1]
-        if self.action.around == "reference":
-            rows = self.rows()
-            return rows[:, 1:N_LINKS] + offset, rows[:, N_LINKS + 1 : 2 * N_LINKS]
-        return np.array(self.action.pose) + offset, np.zeros((len(offset), N_ACTUATED))
-
-    @property
-    def pd_bases_vary(self) -> bool:
-        """Whether the PD targets' bases change in an episode (set before every period).
-
-        They do about the reference, or with offsets that differ between the models.
-        """
-        a = self.action
-        return a.pd and (a.around == "reference" or a.offset_by_model)
-
-    def pd_config(self) -> np.ndarray:
-        """The compiled period's PD settings (:func:`~.actions.pd_config`)."""
-        a = self.action
-        return pd_config(a.pd_substeps, a.torque_limit_nm, a.range, a.kp, a.kd)
 
     # ------------------------------------------------------------------ observation, reward
     def reward(self, q, qd, hip, steps, alive) -> np.ndarray:

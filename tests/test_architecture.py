@@ -94,6 +94,17 @@ def test_the_core_period_only_sequences_its_parts():
         ), name
 
 
+def test_the_action_kind_is_read_in_one_file():
+    """Only actions.py reads which mapping the actions are (its kind, PD or torque, and where
+    its targets are about); the core and the settings ask its part and settings."""
+    import re
+
+    for path in sorted(PKG.glob("*.py")):
+        if path.name != "actions.py":
+            text = path.read_text()
+            assert not re.search(r"\.pd\b|\.around\b|action\.kind", text), path.name
+
+
 def test_core_never_imports_gymnasium():
     for module in LAYERS[: LAYERS.index("simulator") + 1]:
         path = PKG / f"{module}.py"

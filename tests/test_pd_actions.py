@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from biped_constraint_env.actions import PD_KD, PD_KP, check_pd_dt
-from biped_constraint_env.settings import PD_FIXED_POSE_RAD
+from biped_constraint_env.actions import PD_FIXED_POSE_RAD, PD_KD, PD_KP, check_pd_dt
 
 DATA = Path(__file__).parent / "data" / "torque_reference.npz"
 ACTION = np.array([0.1, -0.1, 0.2, 0.1, -0.05])

@@ -5,11 +5,10 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from biped_constraint_env.actions import PD_KD, PD_KP
+from biped_constraint_env.actions import PD_FIXED_POSE_RAD, PD_KD, PD_KP
 from biped_constraint_env.env import ConstrainedBipedEnv
 from biped_constraint_env.reference import load_reference
 from biped_constraint_env.rewards import REWARD_KINDS
-from biped_constraint_env.settings import PD_FIXED_POSE_RAD
 
 TRACK = {"reward": "tracking", "start": {"rsi": 0.5}, "action": {"kind": "pd",
          "around": "reference", "range": 0.5}, "observation": ["phase"]}  # fmt: skip

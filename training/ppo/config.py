@@ -209,7 +209,7 @@ class PPOConfig:
         """
         from training.ppo.sb3_vec import ActionMap, action_map_from
 
-        if self.settings().action.pd:
+        if self.settings().action.unit_actions:  # PD targets in [-1, 1], as they are
             return ActionMap(1.0, None, 1.0)
 
         gear = self.gear[0] if len(self.gear) == 1 else self.gear
@@ -219,14 +219,7 @@ class PPOConfig:
         """What acts at run time: the network alone, or with a PD law or a controller."""
         if self.base_controller:
             return f"network residual on the controller {self.base_controller!r}"
-        s = self.settings()
-        if s.action.pd and s.action.around == "reference":
-            what = "network + PD about the reference pose at the contact clock"
-        elif s.action.pd:
-            what = "network alone (PD targets about a fixed pose)"
-        else:
-            what = "network alone (torques)"
-        return what
+        return self.settings().action.in_the_loop()
 
     def obs_dim(self) -> int:
         """The observation's length (24; + 2 phase entries; + 1 command)."""

@@ -88,7 +88,7 @@ def make_sb3_vec_env(
 
     settings = make_settings(**env_kwargs)
     limit = settings.action.torque_limit_nm
-    if settings.action.pd:  # the env's actions are PD targets in [-1, 1] (task "track" too)
+    if settings.action.unit_actions:  # PD targets in [-1, 1] (task "track" too)
         if action_map is not None and (action_map.base is not None or action_map.limit != 1.0):
             raise ValueError("PD-target actions take ActionMap(1.0, None, 1.0): no gear, no base")
         action_map = action_map or ActionMap(1.0, None, 1.0)
