@@ -21,14 +21,13 @@ from .command import CommandReward, Commands
 from .gait import GaitReward
 from .model import N_ACTUATED
 from .modes import EventCode
-from .observation import observation_space
+from .observation import OBSERVATION_BLOCKS, observation_space
 from .period import EnvBuffers
 from .perturbations import Perturbations
 from .rewards import (
     REWARD_KINDS,
     REWARD_PARTS,
     TERMINATION_FALL,
-    TERMINATION_MODEL_TIME,
     TERMINATION_NON_FINITE,
     reward_config,
 )
@@ -85,7 +84,7 @@ class EnvCore:
         """Allocate the rows' buffers, clock, tracking task and perturbations."""
         s, p, a = settings, settings.physics, settings.action
         self.settings, self.n = s, n
-        self.observation_space = observation_space(s.observation.phase_obs, s.command is not None)
+        self.observation_space = observation_space(s.observation.blocks)
         self.clock = ContactClock(n, p.dt) if s.needs_clock else None
         self.tracking = Tracking(n, s, self.clock) if s.needs_reference else None
         self.action_part = ActionPart(a, n, self.tracking)
@@ -118,6 +117,7 @@ class EnvCore:
         )
         self._terms = np.zeros((n, len(self.reward_keys)))
         self._reasons = np.full(n, None, dtype=object)
+        self._ended_by = np.full(n, None, dtype=object)  # the learning termination of a row
         self._any_reason = False
         self._one = np.zeros(1, bool)  # the single env's terminated flag, reused
 
@@ -219,12 +219,8 @@ class EnvCore:
 
     def _observation_blocks(self) -> list:
         """The observation's blocks after the base entries: fn() -> (n, k), in order."""
-        blocks = []
-        if self.settings.observation.phase_obs:
-            blocks.append(lambda: self.clock.features())
-        if self.commands is not None:
-            blocks.append(lambda: self.commands.features())
-        return blocks
+        blocks = [OBSERVATION_BLOCKS[b].features for b in self.settings.observation.blocks]
+        return [lambda f=f: f(self) for f in blocks]
 
     def _info_extras(self) -> list:
         """``info`` entries of the parts: (keys, fn(row) -> values), in order."""
@@ -284,8 +280,12 @@ class EnvCore:
             terminated[0] = sim.status.item(0) > 0 or buf.fell.item(0) != 0
         else:
             terminated = (sim.status > 0) | (buf.fell != 0)
-        for ends in self.terminations:
-            ends(terminated, skip)
+        for ends in self.terminations:  # the learning task's, in order; the first names a row
+            hit = ends(skip)
+            new = hit & ~terminated
+            if new.any():
+                self._ended_by[new] = ends.reason
+            terminated |= hit
         return terminated
 
     def _set_reasons(self, terminated: np.ndarray) -> None:
@@ -303,8 +303,8 @@ class EnvCore:
                 reasons[i] = TERMINATION_NON_FINITE
             elif self.buf.fell[i]:
                 reasons[i] = TERMINATION_FALL
-            else:
-                reasons[i] = TERMINATION_MODEL_TIME
+            else:  # a learning termination
+                reasons[i], self._ended_by[i] = self._ended_by[i], None
 
     def clear_period(self) -> None:
         """Forget the last period (after a reset: no events, zero terms, no reasons)."""

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-from .clock import PHASE_HIGH, PHASE_LOW
+from .clock import PHASE_HIGH, PHASE_LOW, PHASE_NAMES
 from .command import COMMAND_OBS_HIGH, COMMAND_OBS_LOW
 from .hybrid import nb_wrap
 from .jit import njit_noalloc
@@ -115,17 +119,36 @@ def nb_observe(CHS, SCS, Q, QD, IST, FST, FORCES, OBS, HIP, low, high):
         )
 
 
-def observation_space(phase_obs: bool = False, command: bool = False) -> spaces.Box:
-    """The observation Box (bounds in the env docstring's table).
+@dataclass(frozen=True)
+class ObservationBlock:
+    """Entries appended to the 24 base entries: their names, bounds, and the core's values.
 
-    With ``phase_obs`` the two phase entries of :mod:`.clock` are appended, then with
-    ``command`` the commanded speed (:mod:`.command`).
+    ``features(core)`` gives the (n, k) block after a period or a reset; ``needs_clock``:
+    whether it reads the contact clock (the env then keeps one).
     """
-    low, high = [OBS_LOW], [OBS_HIGH]
-    if phase_obs:
-        low.append(PHASE_LOW)
-        high.append(PHASE_HIGH)
-    if command:
-        low.append(COMMAND_OBS_LOW)
-        high.append(COMMAND_OBS_HIGH)
+
+    names: tuple[str, ...]
+    low: np.ndarray
+    high: np.ndarray
+    features: Callable[[Any], np.ndarray]
+    needs_clock: bool = False
+
+
+OBSERVATION_BLOCKS: dict[str, ObservationBlock] = {
+    "phase": ObservationBlock(PHASE_NAMES, PHASE_LOW, PHASE_HIGH,
+                              lambda core: core.clock.features(), needs_clock=True),
+    "command": ObservationBlock(("command_m_s",), COMMAND_OBS_LOW, COMMAND_OBS_HIGH,
+                                lambda core: core.commands.features()),
+}  # fmt: skip
+"""The observation's blocks by name, in the order they follow the base entries. A new block is
+one entry here (``observation=[name]`` appends it); "command" comes with the command option."""
+
+
+def observation_space(blocks: tuple[str, ...] = ()) -> spaces.Box:
+    """The observation Box: the base entries, then each block of ``blocks``.
+
+    Bounds in the env docstring's table; the blocks' in :data:`OBSERVATION_BLOCKS`.
+    """
+    low = [OBS_LOW, *(OBSERVATION_BLOCKS[b].low for b in blocks)]
+    high = [OBS_HIGH, *(OBSERVATION_BLOCKS[b].high for b in blocks)]
     return spaces.Box(np.concatenate(low), np.concatenate(high), dtype=np.float64)

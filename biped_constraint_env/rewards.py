@@ -28,9 +28,9 @@ from .state import ST_MODE, ST_STEPS
 from .validation import check_choice, check_mapping, check_real
 
 TERMINATION_NON_FINITE = "non_finite"
+"""The reason of an episode whose numerical state blew up."""
 TERMINATION_FALL = "fall"
-TERMINATION_MODEL_TIME = "model_time"
-"""The reason of an episode ended by ``max_model_time_s`` (a contact phase held too long)."""
+"""The reason of an episode ended by ``fall_hip_height_m`` (the hip below it)."""
 
 
 @dataclass(frozen=True)

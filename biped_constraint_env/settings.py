@@ -11,7 +11,7 @@ One keyword argument per part, each a name or a dict of that part's settings:
 ``physics`` (the integrator options: :data:`PHYSICS_KEYS`, on top of ``preset``), ``action``
 (:data:`~.actions.ACTION_KEYS`), ``start`` (a start's name, a dict of component weights, or
 :data:`START_KEYS`), ``reward`` (a kind's name or ``{"kind", "weights", "kernels", ...}``),
-``termination`` (:data:`TERMINATION_KEYS`), ``observation`` (a list of
+``termination`` (:func:`~.terminations.termination_keys`), ``observation`` (a list of
 :data:`OBSERVATION_BLOCKS`), ``perturbations`` and ``command``; besides them ``task``, ``preset``,
 ``dt``, ``params``, ``reference`` and ``render_mode``. A retired flat keyword is refused with
 its new place (:data:`MOVED`).
@@ -29,17 +29,19 @@ import numpy as np
 from .actions import ActionSettings, action_settings
 from .command import CommandSettings, command_settings
 from .model import BipedParams, paper_biped
+from .observation import OBSERVATION_BLOCKS
 from .options import SimOptions
 from .perturbations import PerturbationSettings, perturbation_settings
 from .reference import OWN_REFERENCE, REFERENCES
-from .rewards import RewardSettings, check_fall_height, reward_settings
+from .rewards import RewardSettings, reward_settings
 from .starts import (
     NOMINAL_POSTURE_RAD,
     RESET_NOISE_SCALE_RAD,
     check_start_settings,
     start_name,
 )
-from .tasks import EPISODE_S, MAX_EPISODE_S, TASKS, resolve_options, resolve_task
+from .tasks import TASKS, resolve_options, resolve_task
+from .terminations import TerminationSettings, termination_keys, termination_settings
 from .validation import (
     check_choice,
     check_mapping,
@@ -53,12 +55,6 @@ PHYSICS_KEYS = ("integrator", "substeps", "impact", "locate_events", "jdot", "st
 START_KEYS = ("kind", "posture", "reset_noise_scale", "rsi")
 """Keys of the ``start`` dict: the start (a name or component weights), the rest posture
 (6,) [rad], the reset noise [rad] and the fraction of reference-state starts."""
-TERMINATION_KEYS = ("fall_hip_height_m", "max_model_time_s", "time_limit_s")
-"""Keys of the ``termination`` dict: a fall height [m], a contact phase's longest time [s] and
-the episode's time limit [s] (simulated time); each None: off."""
-OBSERVATION_BLOCKS = ("phase",)
-"""Blocks the ``observation`` list may append to the 24 base entries (the command's entry
-comes with the command)."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +82,7 @@ class StartSettings:
 
 @dataclass(frozen=True)
 class ObservationSettings:
-    """Blocks appended to the 24 base entries (:data:`OBSERVATION_BLOCKS`)."""
+    """Blocks appended to the 24 base entries (:data:`~.observation.OBSERVATION_BLOCKS`)."""
 
     blocks: tuple[str, ...] = ()
 
@@ -95,14 +91,10 @@ class ObservationSettings:
         """Whether the contact clock's phase is observed."""
         return "phase" in self.blocks
 
-
-@dataclass(frozen=True)
-class TerminationSettings:
-    """What ends an episode besides the strict checks (:data:`TERMINATION_KEYS`)."""
-
-    fall_hip_height_m: float | None = None
-    max_model_time_s: float | None = None
-    time_limit_s: float | None = EPISODE_S
+    @property
+    def needs_clock(self) -> bool:
+        """Whether a block reads the contact clock."""
+        return any(OBSERVATION_BLOCKS[b].needs_clock for b in self.blocks)
 
 
 @dataclass(frozen=True)
@@ -129,7 +121,7 @@ class EnvSettings:
     @property
     def max_model_time_s(self) -> float | None:
         """A contact phase's longest time [s] (None: off)."""
-        return self.termination.max_model_time_s
+        return self.termination.get("max_model_time_s")
 
     @property
     def time_limit_s(self) -> float | None:
@@ -149,8 +141,8 @@ class EnvSettings:
     @property
     def needs_clock(self) -> bool:
         """Whether the env keeps a contact clock (phase observed, the gait reward, a reference)."""
-        return (self.observation.phase_obs or self.reward.kind in ("gait", "command")
-                or self.max_model_time_s is not None or self.needs_reference)  # fmt: skip
+        return (self.observation.needs_clock or self.reward.kind in ("gait", "command")
+                or self.termination.needs_clock or self.needs_reference)  # fmt: skip
 
     def as_dict(self) -> dict[str, Any]:
         """The settings as plain data (numbers, strings, lists), in their groups."""
@@ -170,9 +162,10 @@ class EnvSettings:
             "dt": p.dt,
             "options": {k: plain(v) for k, v in dataclasses.asdict(p.options).items()},
         }
-        for name in ("start", "action", "observation", "termination", "perturbations"):
+        for name in ("start", "action", "observation", "perturbations"):
             group = getattr(self, name)
             out[name] = {f.name: plain(getattr(group, f.name)) for f in dataclasses.fields(group)}
+        out["termination"] = self.termination.as_dict()
         out["start"]["start"] = start_name(self.start.start)
         out["reward"] = self.reward.as_dict()
         out["command"] = None if self.command is None else {
@@ -241,29 +234,20 @@ def with_keys(kwargs: dict[str, Any], part: str, **keys: Any) -> dict[str, Any]:
     return {**kwargs, part: {**base, **keys}}
 
 
-def _observation(blocks: Any) -> ObservationSettings:
-    """The ``observation`` kwarg: a list of :data:`OBSERVATION_BLOCKS` (a name: one block)."""
+def _observation(blocks: Any, command: bool) -> ObservationSettings:
+    """The ``observation`` kwarg: a list of :data:`~.observation.OBSERVATION_BLOCKS`.
+
+    A name: one block; the command's block follows with the command option.
+    """
+    own = tuple(b for b in OBSERVATION_BLOCKS if b != "command")
     blocks = (blocks,) if isinstance(blocks, str) else blocks
     if not isinstance(blocks, list | tuple):
-        raise ValueError(f"observation must be a list of blocks from {OBSERVATION_BLOCKS}, "
-                         f"got {blocks!r}")  # fmt: skip
+        raise ValueError(f"observation must be a list of blocks from {own}, got {blocks!r}")
     for b in blocks:
-        check_choice("observation block", b, OBSERVATION_BLOCKS)
+        check_choice("observation block", b, own)
     if len(set(blocks)) != len(blocks):
         raise ValueError(f"observation: a block appears twice in {list(blocks)}")
-    return ObservationSettings(tuple(blocks))
-
-
-def _termination(spec: Any) -> TerminationSettings:
-    """The ``termination`` kwarg: a dict of :data:`TERMINATION_KEYS` (None: the defaults)."""
-    t = dict(check_mapping("termination", {} if spec is None else spec, TERMINATION_KEYS))
-    limit = t.get("time_limit_s", EPISODE_S)
-    return TerminationSettings(
-        fall_hip_height_m=check_fall_height(t.get("fall_hip_height_m")),
-        max_model_time_s=_check_model_time(t.get("max_model_time_s")),
-        time_limit_s=None if limit is None else check_real(
-            "time_limit_s", limit, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"),
-    )  # fmt: skip
+    return ObservationSettings(tuple(blocks) + (("command",) if command else ()))
 
 
 def make_settings(
@@ -322,19 +306,12 @@ def make_settings(
         ),  # fmt: skip
         action=action_settings(action, task_t.get("action", "torque"), dt),
         reward=reward_s,
-        observation=_observation(t["observation"]),
+        observation=_observation(t["observation"], commands is not None),
         perturbations=perturbation_settings(perturbations),
         reference=_reference(reference, start_kind),
-        termination=_termination(termination),
+        termination=termination_settings(termination),
         command=commands,
     )
-
-
-def _check_model_time(max_model_time_s) -> float | None:
-    """The validated ``max_model_time_s`` [s] (None: off)."""
-    if max_model_time_s is None:
-        return None
-    return check_real("max_model_time_s", max_model_time_s, 0.0, 1e3, low_open=True, unit=" [s]")
 
 
 RETIRED = {
@@ -349,7 +326,7 @@ MOVED = {
     **{k: f"physics={{{k!r}: ...}}" for k in PHYSICS_KEYS},
     **{k: f"action={{{k!r}: ...}}" for k in ("torque_limit_nm", "out_of_range")},
     **{k: f"start={{{k!r}: ...}}" for k in ("posture", "reset_noise_scale", "rsi")},
-    **{k: f"termination={{{k!r}: ...}}" for k in TERMINATION_KEYS},
+    **{k: f"termination={{{k!r}: ...}}" for k in termination_keys()},
     "phase_obs": "observation=['phase']",
     **{k: f"reward={{'kind': 'env', 'weights': {{{t!r}: ...}}}}"
        for k, t in (("forward_reward_weight", "forward"), ("alive_bonus", "alive"),

@@ -33,11 +33,6 @@ STRIDE_FLAT_LEAN_RANGE_RAD = (-0.3, 0.3)
 STRIDE_FLAT_RATE_RANGE_RAD_S = (-0.6, -0.2)
 """Range of the stance leg's turning rate about the ankle at a stride start on the flat foot
 (model 1) [rad/s] (< 0: forward; the hip 0.6-1.8 m/s)."""
-STARTS = ("rest", "midstride", "mixed", "stride")
-"""Named values of the env's ``start`` argument ("mixed": rest or mid-stride, 1/2 each;
-"stride": the mid-stride start with its swing leg drawn along its swing)."""
-START_COMPONENTS = ("rest", "midstride", "stride")
-"""Components of a start mixture (``start={"stride": 0.75, "midstride": 0.25}``)."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 MAX_RESET_NOISE_RAD = 1.0
@@ -112,7 +107,7 @@ def flat_foot_stride_start(
 def sample_start(
     rng: np.random.Generator, start: str | tuple, posture: np.ndarray, noise_scale: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """(q, qd, mode) of a sampled episode start (``start`` in :data:`STARTS`, or a mixture).
+    """(q, qd, mode) of a sampled episode start (``start`` in :func:`start_names`, or a mixture).
 
     A mixture, ((component, weight), ...) with the weights summing to 1: one uniform draw
     first picks the first component whose cumulative weight exceeds it ("mixed" is
@@ -134,27 +129,52 @@ def sample_start(
         start = "rest" if rng.random() < 0.5 else "midstride"
     elif not isinstance(start, str):
         start = _pick(start, rng.random())
-    if start == "rest":
-        return sample_initial_q(rng, posture, noise_scale), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
-    flat = start == "stride" and rng.random() < 0.5
+    q, qd, mode = START_COMPONENTS[start](rng, posture)
+    q[1:] += _uniform(rng, -noise_scale, noise_scale, N_LINKS - 1)
+    return q, qd, mode
+
+
+def _rest(rng, posture):
+    """The ``posture`` at rest in model 1."""
+    return np.array(posture, dtype=np.float64), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
+
+
+def _midstride(rng, posture):
+    """:func:`midstride_start` with its rate and theta0 drawn, in model 2."""
+    rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)
+    theta0 = _uniform(rng, *MIDSTRIDE_THETA0_RANGE_RAD)
+    q, qd = midstride_start(rate, theta0)
+    return q, qd, int(Mode.TOE_PIVOT)
+
+
+def _stride(rng, posture):
+    """The swing leg drawn along its swing: in model 2, or half the draws on the flat foot."""
+    flat = rng.random() < 0.5
     if flat:
         rate = _uniform(rng, *STRIDE_FLAT_RATE_RANGE_RAD_S)
         lean = _uniform(rng, *STRIDE_FLAT_LEAN_RANGE_RAD)
     else:
         rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)
         theta0 = _uniform(rng, *MIDSTRIDE_THETA0_RANGE_RAD)
-    if start == "stride":
-        swing = _uniform(rng, *STRIDE_SWING_RANGE_RAD)
-        knee = _uniform(rng, *STRIDE_KNEE_RANGE_RAD)
-        swing_rate = _uniform(rng, *STRIDE_SWING_RATE_RANGE_RAD_S)
-        if flat:
-            q, qd = flat_foot_stride_start(rate, lean, swing, knee, swing_rate)
-        else:
-            q, qd = midstride_start(rate, theta0, swing=swing, knee=knee, swing_rate=swing_rate)
-    else:
-        q, qd = midstride_start(rate, theta0)
-    q[1:] += _uniform(rng, -noise_scale, noise_scale, N_LINKS - 1)
-    return q, qd, int(Mode.FOOT_FLAT if flat else Mode.TOE_PIVOT)
+    swing = _uniform(rng, *STRIDE_SWING_RANGE_RAD)
+    knee = _uniform(rng, *STRIDE_KNEE_RANGE_RAD)
+    swing_rate = _uniform(rng, *STRIDE_SWING_RATE_RANGE_RAD_S)
+    if flat:
+        q, qd = flat_foot_stride_start(rate, lean, swing, knee, swing_rate)
+        return q, qd, int(Mode.FOOT_FLAT)
+    q, qd = midstride_start(rate, theta0, swing=swing, knee=knee, swing_rate=swing_rate)
+    return q, qd, int(Mode.TOE_PIVOT)
+
+
+START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride}
+"""The start components by name: each draws (q, qd, mode) from a row's generator and the rest
+posture, before the reset noise. A new start is one entry here (``start`` or a mixture
+``start={"stride": 0.75, "midstride": 0.25}`` names it)."""
+
+
+def start_names() -> tuple[str, ...]:
+    """Named values of the env's ``start``: every component, and "mixed" (rest, mid-stride)."""
+    return (*START_COMPONENTS, "mixed")
 
 
 def _pick(mixture: tuple, u: float) -> str:
@@ -291,20 +311,20 @@ def check_start_state(params: BipedParams, state: SimState) -> None:
 
 
 def check_start_kind(start: Any) -> str | tuple[tuple[str, float], ...]:
-    """A named start (:data:`STARTS`), or a mixture {component: weight} as ((name, w), ...).
+    """A named start (:func:`start_names`), or a mixture {component: weight} as ((name, w), ...).
 
     The weights (>= 0, finite, summing to > 0) are normalised to sum to 1, in the given order.
     """
     if isinstance(start, str):
-        return check_choice("start", start, STARTS)
+        return check_choice("start", start, start_names())
     if not isinstance(start, dict):
         raise ValueError(
-            f"start must be one of {STARTS} or a mixture {{component: weight}} of "
-            f"{START_COMPONENTS}, got {start!r}"
+            f"start must be one of {start_names()} or a mixture {{component: weight}} of "
+            f"{tuple(START_COMPONENTS)}, got {start!r}"
         )
-    check_mapping("start mixture", start, START_COMPONENTS)
+    check_mapping("start mixture", start, tuple(START_COMPONENTS))
     if not start:
-        raise ValueError(f"a start mixture names at least one of {START_COMPONENTS}")
+        raise ValueError(f"a start mixture names at least one of {tuple(START_COMPONENTS)}")
     weights = {k: check_real(f"start weight of {k!r}", w, 0.0, 1e6) for k, w in start.items()}
     total = sum(weights.values())
     if total <= 0:

@@ -1,44 +1,119 @@
-"""Early terminations for learning, as a named list: each ends rows after a period.
+"""Terminations: the ``termination`` part, its settings and the learning task's named list.
 
-The strict checks' out-of-model events and the fall height end an episode inside the compiled
-period; the terminations here are the learning task's own, chosen by name from the
-``termination`` settings (:data:`TERMINATIONS`) and run by the core in that order. One is a
-class built from the core (:class:`~.core.EnvCore`), called with the period's ``terminated``
-flags (set in place) and the rows it skipped.
+The strict checks' out-of-model events and the fall height (``fall_hip_height_m``) end an
+episode inside the compiled period, and ``time_limit_s`` truncates it by simulated time; the
+learning task's own early terminations are named here (:data:`TERMINATIONS`), each switched on
+by its key in the ``termination`` dict, and run by the core after a period in that order. A
+new one is one entry here: its key's check and a class built from the core, called with the
+rows the period skipped, returning the rows it ends (its ``reason`` names them in ``info``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
+
+from .rewards import check_fall_height
+from .tasks import EPISODE_S, MAX_EPISODE_S
+from .validation import check_mapping, check_real
 
 
 class ModelTime:
     """``termination={"max_model_time_s": T}``: a contact phase held longer than T [s].
 
     By the contact clock; with a command, only while it is not zero (standing holds a contact
-    phase). The reason is ``model_time``.
+    phase). Reason ``model_time``.
     """
 
-    def __init__(self, core):
-        """For ``core``'s clock, its commands (if any) and the limit."""
-        self.clock, self.commands = core.clock, core.commands
-        self.limit_s = core.settings.termination.max_model_time_s
+    reason = "model_time"
 
-    def __call__(self, terminated: np.ndarray, skip) -> None:
-        """Set ``terminated`` where a stepped row held its contact phase too long."""
+    def __init__(self, core, limit_s: float):
+        """For ``core``'s clock and commands (if any), and the limit [s]."""
+        self.clock, self.commands, self.limit_s = core.clock, core.commands, limit_s
+
+    def __call__(self, skip) -> np.ndarray:
+        """(n,) the stepped rows that held their contact phase too long."""
         held = self.clock.model_time_s() > self.limit_s + 1e-9
         if self.commands is not None:
             held &= self.commands.v != 0.0
         if skip is not None:
             held[skip] = False
-        terminated |= held
+        return held
 
 
-TERMINATIONS = {"max_model_time_s": ModelTime}
-"""The learning task's terminations by their ``termination`` setting, in the order they run."""
+def check_model_time(value) -> float:
+    """A contact phase's longest time [s]."""
+    return check_real("max_model_time_s", value, 0.0, 1e3, low_open=True, unit=" [s]")
+
+
+@dataclass(frozen=True)
+class Termination:
+    """A learning termination: its setting's check, its class and its clock.
+
+    ``make(core, value)`` builds it; ``needs_clock``: whether it reads the contact clock.
+    """
+
+    check: Callable[[Any], Any]
+    make: Callable
+    needs_clock: bool = False
+
+
+TERMINATIONS: dict[str, Termination] = {
+    "max_model_time_s": Termination(check_model_time, ModelTime, needs_clock=True),
+}
+"""The learning task's terminations by their ``termination`` key, in the order they run."""
+BUILT_IN = ("fall_hip_height_m", "time_limit_s")
+"""The ``termination`` keys of the compiled fall and of the truncation by simulated time."""
+
+
+@dataclass(frozen=True)
+class TerminationSettings:
+    """What ends an episode besides the strict checks.
+
+    A fall height [m] (None: off), the time limit [s] (None: none) and the learning
+    terminations switched on ((key, value), ...).
+    """
+
+    fall_hip_height_m: float | None = None
+    time_limit_s: float | None = EPISODE_S
+    learning: tuple[tuple[str, Any], ...] = ()
+
+    def get(self, key: str) -> Any:
+        """The value of a learning termination's key (None: off)."""
+        return dict(self.learning).get(key)
+
+    @property
+    def needs_clock(self) -> bool:
+        """Whether a termination on reads the contact clock."""
+        return any(TERMINATIONS[k].needs_clock for k, _ in self.learning)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The settings as data: every key of the ``termination`` dict, None where off."""
+        return {"fall_hip_height_m": self.fall_hip_height_m, "time_limit_s": self.time_limit_s,
+                **{k: self.get(k) for k in TERMINATIONS}}  # fmt: skip
+
+
+def termination_keys() -> tuple[str, ...]:
+    """Every key the ``termination`` dict takes."""
+    return (*BUILT_IN, *TERMINATIONS)
+
+
+def termination_settings(spec: Any) -> TerminationSettings:
+    """The ``termination`` kwarg: a dict of :func:`termination_keys` (None: the defaults)."""
+    t = dict(check_mapping("termination", {} if spec is None else spec, termination_keys()))
+    limit = t.get("time_limit_s", EPISODE_S)
+    return TerminationSettings(
+        fall_hip_height_m=check_fall_height(t.get("fall_hip_height_m")),
+        time_limit_s=None if limit is None else check_real(
+            "time_limit_s", limit, 0.0, MAX_EPISODE_S, low_open=True, unit=" [s]"),
+        learning=tuple((k, TERMINATIONS[k].check(t[k])) for k in TERMINATIONS
+                       if t.get(k) is not None),
+    )  # fmt: skip
 
 
 def terminations(core) -> list:
-    """The terminations ``core``'s settings switch on (a setting not None), in order."""
-    t = core.settings.termination
-    return [make(core) for key, make in TERMINATIONS.items() if getattr(t, key) is not None]
+    """The learning terminations ``core``'s settings switch on, built, in order."""
+    return [TERMINATIONS[k].make(core, v) for k, v in core.settings.termination.learning]

@@ -226,7 +226,7 @@ class PPOConfig:
         from biped_constraint_env.observation import observation_space
 
         s = self.settings()
-        return observation_space(s.observation.phase_obs, s.command is not None).shape[0]
+        return observation_space(s.observation.blocks).shape[0]
 
     def policy_kwargs(self) -> dict:
         """``policy_kwargs`` of SB3's ``MlpPolicy`` for this config.

@@ -573,7 +573,7 @@ def build_policy(cfg, observation_space=None):
 
     if observation_space is None:
         s = cfg.settings()
-        observation_space = env_obs_space(s.observation.phase_obs, s.command is not None)
+        observation_space = env_obs_space(s.observation.blocks)
     act_space = spaces.Box(-1.0, 1.0, (5,), np.float32)
     return ActorCriticPolicy(
         observation_space, act_space, lambda _: 0.0, use_sde=cfg.use_sde, **cfg.policy_kwargs()

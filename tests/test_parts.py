@@ -1,0 +1,87 @@
+"""A new start component, termination or observation block is one entry in its part's file.
+
+Each test adds one (monkeypatched into the registry, as a user's own module would) and runs it
+in the single and the batched env, which agree row for row.
+"""
+
+import gymnasium as gym
+import numpy as np
+
+import biped_constraint_env  # noqa: F401
+from biped_constraint_env import observation, starts, terminations
+from biped_constraint_env.modes import Mode
+
+
+def _single_and_batched(kw, steps=5, n=3, action=None):
+    """(observations, infos) of n single envs seeded 7 + i and of one batched env seeded 7."""
+    act = np.zeros((n, 5)) if action is None else np.tile(action, (n, 1))
+    venv = gym.make_vec("ConstrainedBiped-v0", n, vectorization_mode="vector_entry_point", **kw)
+    vo, _ = venv.reset(seed=7)
+    envs = [gym.make("ConstrainedBiped-v0", **kw) for _ in range(n)]
+    so = np.array([e.reset(seed=7 + i)[0] for i, e in enumerate(envs)])
+    np.testing.assert_array_equal(vo, so)
+    reasons = []
+    for _ in range(steps):
+        vo, _, vterm, _, vinfo = venv.step(act)
+        outs = [e.step(act[i]) for i, e in enumerate(envs)]
+        assert list(vterm) == [o[2] for o in outs]
+        reasons.append([o[4]["termination_reason"] for o in outs])
+        assert list(vinfo["termination_reason"]) == reasons[-1]
+        if any(vterm):
+            break
+        np.testing.assert_array_equal(vo, np.array([o[0] for o in outs]))
+    return vo, reasons
+
+
+def test_a_new_start_component_is_one_entry(monkeypatch):
+    def crouch(rng, posture):  # the rest posture, knees bent a little more
+        q = np.array(posture, dtype=np.float64)
+        q[2] -= 0.05 + 0.05 * rng.random()
+        return q, np.zeros(6), int(Mode.FOOT_FLAT)
+
+    monkeypatch.setitem(starts.START_COMPONENTS, "crouch", crouch)
+    env = gym.make("ConstrainedBiped-v0", start="crouch").unwrapped
+    env.reset(seed=0)
+    assert env.state.mode == 1 and env.state.q[2] < 0.1 - 0.05
+    mixed = {"start": {"crouch": 0.5, "midstride": 0.5}}
+    _single_and_batched(mixed)
+    seen = {gym.make("ConstrainedBiped-v0", **mixed).unwrapped.reset(seed=s)[1]["mode"]
+            for s in range(20)}  # fmt: skip
+    assert seen == {1, 2}
+
+
+def test_a_new_termination_is_one_entry(monkeypatch):
+    class Slow:  # ends a row whose hip moves forward slower than the limit after a period
+        reason = "too_slow"
+
+        def __init__(self, core, limit):
+            self.hip, self.limit = core.hip, limit
+
+        def __call__(self, skip):
+            slow = self.hip[:, 2] < self.limit
+            if skip is not None:
+                slow[skip] = False
+            return slow
+
+    entry = terminations.Termination(float, Slow)
+    monkeypatch.setitem(terminations.TERMINATIONS, "min_hip_speed_m_s", entry)
+    kw = {"task": "paper", "preset": "default", "termination": {"min_hip_speed_m_s": 10.0}}
+    _, reasons = _single_and_batched(kw)
+    assert reasons[0] == ["too_slow"] * 3  # at rest: slower than 10 m/s after one period
+    s = gym.make("ConstrainedBiped-v0", **kw).unwrapped.settings
+    assert s.termination.as_dict()["min_hip_speed_m_s"] == 10.0
+
+
+def test_a_new_observation_block_is_one_entry(monkeypatch):
+    def hip_z(core):
+        return core.hip[:, 1:2]
+
+    low, high = np.array([-10.0]), np.array([10.0])
+    block = observation.ObservationBlock(("hip_z_again",), low, high, hip_z)
+    monkeypatch.setitem(observation.OBSERVATION_BLOCKS, "hip_z_again", block)
+    kw = {"task": "paper", "preset": "default", "observation": ["phase", "hip_z_again"]}
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (27,) and env.observation_space.shape == (27,)
+    assert obs[-1] == obs[observation.OBS_NAMES.index("hip_z")]
+    _single_and_batched(kw)
