@@ -92,7 +92,8 @@ class EnvCore:
                        else tuple(t.weight for t in REWARD_KINDS["env"]))  # fmt: skip
         self.buf = EnvBuffers(
             n, p.params, p.options, p.dt,
-            reward_config(env_weights, a.torque_limit_nm, s.fall_hip_height_m),
+            reward_config(env_weights, a.torque_limit_nm, s.fall_hip_height_m,
+                          s.reward.kind == "env"),
             action_config(a.bound, a.out_of_range), num_threads,
             pcfg=self.action_part.pcfg,
         )  # fmt: skip

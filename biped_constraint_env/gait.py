@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kinematics import nb_swing_ankle_vy
 from .rewards import REWARD_KINDS, RewardSettings
 
 SWING_MODELS = (1, 2)
@@ -58,12 +57,6 @@ class GaitReward:
         self._cadence = np.zeros(5)  # indexed by the model, 1-4
         self._cadence[1:] = reward.target("cadence")
         self._gated = reward.gated
-        self._swing_vy = np.zeros(n)
-
-    def swing_ankle_vy(self, chs, q, qd, ist) -> np.ndarray:
-        """(n,) the swing ankles' forward speeds [m/s] (a view, overwritten by the next call)."""
-        nb_swing_ankle_vy(chs, q, qd, ist, self._swing_vy)
-        return self._swing_vy
 
     def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive):
         """(n, 6): the terms (GAIT_TERMS order) and their sum, after a period.

@@ -3,8 +3,10 @@
 :class:`~.env.ConstrainedBipedEnv` and :class:`~.vector_env.ConstrainedBipedVectorEnv` both
 step through :func:`nb_env_period`: the torque check (:func:`~.actions.nb_check_torques`), the
 simulator's :func:`~.simulator.nb_advance_w`, the observation
-(:func:`~.observation.nb_observe_row`) and the reward (:func:`~.rewards.nb_reward_terms`), so
-they agree bit for bit, and a single ``env.step`` enters compiled code once. The Python around
+(:func:`~.observation.nb_observe_row`) and the per-period record every reward kind reads
+(:data:`~.rewards.N_RECORD`: the "env" reward's terms, :func:`~.rewards.nb_reward_terms`, where
+it is the reward; the progress, switches, steps, torque and swing-ankle speed), so they agree
+bit for bit, and a single ``env.step`` enters compiled code once. The Python around
 it checks the action's shape and dtype and builds ``info``.
 """
 
@@ -24,10 +26,23 @@ from .actions import (
 from .advance import PARALLEL_MIN_BATCH, nb_advance_w
 from .hybrid import IO_STOP_AT_SWITCH, nb_make_work
 from .jit import njit_noalloc
-from .kinematics import NK
+from .kinematics import K_VY, NK
 from .model import N_ACTUATED, N_LINKS
 from .observation import OBS_DIM, OBS_HIGH, OBS_LOW, nb_observe, nb_observe_row
-from .rewards import nb_cycle_position, nb_fallen, nb_reward_terms
+from .rewards import (
+    CFG_ENV,
+    N_ENV_TERMS,
+    N_RECORD,
+    REC_ALIVE,
+    REC_PROGRESS,
+    REC_STEPS,
+    REC_SWING_VY,
+    REC_SWITCHES,
+    REC_TAU_SQ,
+    nb_cycle_position,
+    nb_fallen,
+    nb_reward_terms,
+)
 from .simulator import SimArrays
 from .state import (
     FS_T,
@@ -39,8 +54,8 @@ from .state import (
 )
 from .stepper import nb_make_scratch
 
-N_REWARD_OUT = 6
-"""Columns of the reward output: the five REWARD_TERMS, then their sum."""
+N_REWARD_OUT = N_RECORD
+"""Columns of the per-period record (:data:`~.rewards.N_RECORD`)."""
 
 
 @njit(cache=True)
@@ -166,17 +181,23 @@ def _period_rows(
         fell = STATUS[i] == STATUS_OK and nb_fallen(HIP[i, 1], cfg)
         FELL[i] = 1 if fell else 0
         terminated = STATUS[i] == STATUS_TERMINATED or STATUS[i] == STATUS_NONFINITE or fell
-        nb_reward_terms(
-            HIP[i, 0] - hip0,
-            dt,
-            nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS]) - pos0,
-            IST[i, ST_STEPS] - steps0,
-            not terminated,
-            ACT[i],
-            cfg,
-            REW[i],
-            tau_sq,
-        )
+        if tau_sq < 0.0:  # torque actions: the held torques' sum of squares
+            tau_sq = 0.0
+            for j in range(N_ACTUATED):
+                tau_sq += ACT[i, j] * ACT[i, j]
+        rec = REW[i]  # the period's record, read by every reward kind
+        rec[REC_PROGRESS] = HIP[i, 0] - hip0
+        rec[REC_SWITCHES] = nb_cycle_position(IST[i, ST_MODE], IST[i, ST_STEPS]) - pos0
+        rec[REC_STEPS] = IST[i, ST_STEPS] - steps0
+        rec[REC_ALIVE] = 0.0 if terminated else 1.0
+        rec[REC_TAU_SQ] = tau_sq
+        rec[REC_SWING_VY] = K[5, K_VY]  # the swing ankle's, from the observation's pass
+        if cfg[CFG_ENV] != 0.0:  # the "env" reward's terms, only where they are the reward
+            nb_reward_terms(rec[REC_PROGRESS], dt, rec[REC_SWITCHES], rec[REC_STEPS],
+                            not terminated, ACT[i], cfg, rec[:N_ENV_TERMS], tau_sq)  # fmt: skip
+        else:
+            for c in range(N_ENV_TERMS):
+                rec[c] = 0.0
 
 
 @njit(cache=True)
@@ -194,8 +215,9 @@ def nb_env_period(
     refuses one, nothing else is done and 1 is returned. Arguments: the simulator's
     (:func:`~.simulator.nb_advance_batch`, with ACT for its torque tables), then OBS (n, 24)
     and HIP (n, 4), the observation and hip kinematics, read before (progress) and written
-    after the period; cfg, :func:`~.rewards.reward_config`; REW (n, 6), written: the reward
-    terms and their sum (zeros for rows whose STATUS is negative: resetting, not stepped);
+    after the period; cfg, :func:`~.rewards.reward_config`; REW (n, 12), written: the
+    per-period record (:data:`~.rewards.N_RECORD`; zeros for rows whose STATUS is negative:
+    resetting, not stepped);
     FELL (n,), written: 1 where the hip fell below the fall height in this period; TGT, RATE
     (n, 5): the PD targets' base [rad] and rates [rad/s], and pcfg
     (:func:`~.actions.pd_config`), for PD-target actions (``pcfg[0] > 0``: ACT holds the
@@ -233,7 +255,7 @@ class EnvBuffers:
     """The arrays one compiled period reads and writes for N environments.
 
     ``sim`` (:class:`~.simulator.SimArrays`), ``act`` (n, 5) the actions [N m], ``obs``
-    (n, 24), ``hip`` (n, 4: hip y, z, vy, vz), ``rew`` (n, 6: the reward terms and their sum)
+    (n, 24), ``hip`` (n, 4: hip y, z, vy, vz), ``rew`` (n, 12: the per-period record)
     and ``fell`` (n,). :meth:`period` runs :func:`nb_env_period` on them; batches of at least
     ``PARALLEL_MIN_BATCH`` rows given ``num_threads`` > 1 are split among that many numba
     threads (:func:`nb_env_period_parallel`).

@@ -24,7 +24,7 @@ import numpy as np
 
 from .jit import njit_noalloc
 from .modes import N_MODELS
-from .state import ST_MODE, ST_STEPS
+from .state import ST_MODE
 from .validation import check_choice, check_mapping, check_real
 
 TERMINATION_NON_FINITE = "non_finite"
@@ -235,20 +235,34 @@ def _target(name: str, value: Any, per_model: bool) -> float | tuple[float, ...]
 REWARD_WEIGHT_MAX = 1e6
 """Largest accepted reward weight."""
 
-CFG_FORWARD, CFG_ALIVE, CFG_SWITCH, CFG_STEP, CFG_CTRL, CFG_LIMIT, CFG_FALL = range(7)
+CFG_FORWARD, CFG_ALIVE, CFG_SWITCH, CFG_STEP, CFG_CTRL, CFG_LIMIT, CFG_FALL, CFG_ENV = range(8)
+N_ENV_TERMS = 6
+"""Columns 0-5 of the per-period record: the "env" reward's five terms and their sum."""
+REC_PROGRESS, REC_SWITCHES, REC_STEPS, REC_ALIVE, REC_TAU_SQ, REC_SWING_VY = range(6, 12)
+N_RECORD = 12
+"""The per-period record the compiled period writes for every row and every reward kind
+(:func:`~.period.nb_env_period`): the "env" reward's terms and sum (columns 0-5, written for
+that kind only), then the period's hip progress [m], forward model switches, completed steps,
+whether no event or fall ended it (1/0), the time mean of sum(tau^2) [N^2 m^2] and the swing
+ankle's forward speed after it [m/s]. Every reward kind's terms read it; zeros for rows not
+stepped."""
 """Entries of :func:`reward_config`'s array."""
 
 
 def reward_config(
-    weights: tuple[float, ...], torque_limit_nm: float, fall_hip_height_m: float | None
+    weights: tuple[float, ...],
+    torque_limit_nm: float,
+    fall_hip_height_m: float | None,
+    env_kind: bool = True,
 ) -> np.ndarray:
     """The reward settings as one array, for :func:`nb_reward_terms`.
 
-    The weights (REWARD_TERMS order), the torque bound [N m] and the fall height [m] (-inf:
-    off), indexed by the CFG_* constants.
+    The weights (REWARD_TERMS order), the torque bound [N m], the fall height [m] (-inf:
+    off) and whether the env's reward is the "env" kind (its terms computed in the period),
+    indexed by the CFG_* constants.
     """
     fall = -np.inf if fall_hip_height_m is None else fall_hip_height_m
-    return np.array([*weights, torque_limit_nm, fall], dtype=np.float64)
+    return np.array([*weights, torque_limit_nm, fall, float(env_kind)], dtype=np.float64)
 
 
 @njit_noalloc
@@ -308,20 +322,20 @@ class EnvRewardPart:
     def after(self, core, snap, terminated, skip):
         """(terms (n, k), rewards (n,)) of the period, as the compiled call wrote them."""
         rew = core.buf.rew
-        return rew[:, : len(REWARD_TERMS)], rew[:, -1].copy()
+        return rew[:, : len(REWARD_TERMS)], rew[:, N_ENV_TERMS - 1].copy()
 
 
 class TrackingRewardPart:
     """``reward="tracking"``: kernels against the reference at the clock (``core.tracking``)."""
 
     def before(self, core):
-        """The steps completed before the period."""
-        return core.sim.ist[:, ST_STEPS].copy()
+        """Nothing to remember: the period's record holds its steps."""
+        return None
 
-    def after(self, core, steps0, terminated, skip):
+    def after(self, core, snap, terminated, skip):
         """(terms, rewards) of the period; rows in ``skip`` earn nothing."""
         sim = core.sim
-        track = core.tracking.reward(sim.q, sim.qd, core.hip, sim.ist[:, ST_STEPS] - steps0,
+        track = core.tracking.reward(sim.q, sim.qd, core.hip, core.buf.rew[:, REC_STEPS],
                                      ~terminated)  # fmt: skip
         if skip is not None:
             track[skip] = 0.0
@@ -332,17 +346,15 @@ class GaitRewardPart:
     """``reward="gait"``: the task's and the contact clock's terms (``core.gait``)."""
 
     def before(self, core):
-        """The steps completed and the hip's y before the period."""
-        return core.sim.ist[:, ST_STEPS].copy(), core.hip[:, 0].copy()
+        """Nothing to remember: the period's record holds its progress and steps."""
+        return None
 
     def after(self, core, snap, terminated, skip):
         """(terms, rewards) of the period; rows in ``skip`` earn nothing."""
-        steps0, hip_y0 = snap
-        sim, g = core.sim, core.gait
-        swing_vy = g.swing_ankle_vy(core.buf.chs, sim.q, sim.qd, sim.ist)
-        out = g.terms(core.hip[:, 0] - hip_y0, core.hip[:, 1], swing_vy,
-                      sim.ist[:, ST_MODE], core.clock.model_time_s(),
-                      sim.ist[:, ST_STEPS] - steps0, ~terminated)  # fmt: skip
+        rec, sim = core.buf.rew, core.sim
+        out = core.gait.terms(rec[:, REC_PROGRESS], core.hip[:, 1], rec[:, REC_SWING_VY],
+                              sim.ist[:, ST_MODE], core.clock.model_time_s(),
+                              rec[:, REC_STEPS], ~terminated)  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1].copy()
@@ -352,18 +364,16 @@ class CommandRewardPart:
     """``reward="command"``: the gait terms against each row's command (``core.commands``)."""
 
     def before(self, core):
-        """The steps completed, the hip's y and the commands before the period."""
-        return (core.sim.ist[:, ST_STEPS].copy(), core.hip[:, 0].copy(),
-                core.commands.v.copy())  # fmt: skip
+        """The commands the period runs under."""
+        return core.commands.v.copy()
 
-    def after(self, core, snap, terminated, skip):
+    def after(self, core, command, terminated, skip):
         """(terms, rewards) of the period against the command it ran under."""
-        steps0, hip_y0, command = snap
-        sim = core.sim
-        swing_vy = core.command_reward.swing_ankle_vy(core.buf.chs, sim.q, sim.qd, sim.ist)
-        out = core.command_reward.terms(command, core.hip[:, 0] - hip_y0, core.hip[:, 1],
-                                        swing_vy, sim.ist[:, ST_MODE], core.clock.model_time_s(),
-                                        sim.ist[:, ST_STEPS] - steps0, ~terminated)  # fmt: skip
+        rec, sim = core.buf.rew, core.sim
+        out = core.command_reward.terms(command, rec[:, REC_PROGRESS], core.hip[:, 1],
+                                        rec[:, REC_SWING_VY], sim.ist[:, ST_MODE],
+                                        core.clock.model_time_s(), rec[:, REC_STEPS],
+                                        ~terminated)  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1].copy()

@@ -8,9 +8,9 @@ import pytest
 
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.gait import GAIT_TERMS, GaitReward
-from biped_constraint_env.kinematics import keypoints
+from biped_constraint_env.kinematics import keypoints, nb_swing_ankle_vy
 from biped_constraint_env.model import paper_biped
-from biped_constraint_env.rewards import REWARD_KINDS, reward_settings
+from biped_constraint_env.rewards import REC_SWING_VY, REWARD_KINDS, reward_settings
 from biped_constraint_env.settings import make_settings
 from training.controller.model_controller import controller_from
 
@@ -100,7 +100,10 @@ def test_the_swing_ankle_speed_is_the_finite_difference_of_its_position():
         assert not term
         sim = u.core.sim
         q, qd, side = sim.q[0].copy(), sim.qd[0].copy(), int(sim.ist[0, 1])
-        vy = u.core.gait.swing_ankle_vy(u.core.buf.chs, sim.q, sim.qd, sim.ist)[0]
+        vy = u.core.buf.rew[0, REC_SWING_VY]  # the period's record
+        again = np.zeros(1)
+        nb_swing_ankle_vy(u.core.buf.chs, sim.q, sim.qd, sim.ist, again)
+        assert vy == again[0]  # the kinematics' own routine, bit for bit
         h = 1e-6
         chain = params.chain(side)
         fd = (keypoints(chain, q + h * qd)[SWING_ANKLE, 0]

@@ -85,3 +85,32 @@ def test_a_new_observation_block_is_one_entry(monkeypatch):
     assert obs.shape == (27,) and env.observation_space.shape == (27,)
     assert obs[-1] == obs[observation.OBS_NAMES.index("hip_z")]
     _single_and_batched(kw)
+
+
+def test_one_record_per_period_serves_every_reward_kind():
+    """The compiled period writes one record per row: the "env" terms only where they are the
+    reward (zeros else, none computed and dropped), and the progress, steps and swing speed
+    that the other kinds' terms read (no second compiled call)."""
+    from biped_constraint_env.rewards import REC_PROGRESS, REC_STEPS, REC_SWING_VY
+
+    for reward in ("env", "gait"):
+        env = gym.make("ConstrainedBiped-v0", reward=reward, task="paper", preset="default")
+        env.reset(seed=3)
+        u = env.unwrapped
+        y0 = u.core.hip[0, 0]
+        _, r, _, _, info = env.step(np.zeros(5))
+        rec = u.core.buf.rew[0]
+        assert rec[REC_PROGRESS] == u.core.hip[0, 0] - y0 and rec[REC_STEPS] == 0.0
+        assert np.isfinite(rec[REC_SWING_VY])
+        if reward == "env":
+            assert rec[5] == r and rec[0] == info["reward_forward"]
+        else:
+            assert (
+                not rec[:6].any()
+                and r
+                == info["reward_speed"]
+                + info["reward_height"]
+                + info["reward_swing"]
+                + info["reward_cadence"]
+                + info["reward_step"]
+            )
