@@ -61,15 +61,25 @@ NOT_STEPPED = -1
 """Status given to rows that skip a period (autoreset): the compiled period leaves them."""
 
 
-def event_infos(events) -> tuple[tuple, tuple]:
+EVENT_NAMES = tuple(c.name.lower() for c in sorted(EventCode))
+"""Each event code's name in ``info`` (indexed by the code)."""
+
+
+def event_infos(rows: list) -> tuple[tuple, tuple]:
     """``info["switches"]`` and ``info["events"]`` of one row's events.
 
-    ``switches``: (t, from, to) of each model switch; ``events``: (t, name, terminal) of each.
+    ``rows``: its event buffer's rows as lists (t, code, from, to, terminal), as
+    :meth:`~.state.SimArrays.events_of` decodes them; ``switches``: (t, from, to) of each
+    model switch; ``events``: (t, name, terminal) of each.
     """
-    switches = tuple(
-        (e.t, e.mode_from, e.mode_to) for e in events if e.code == EventCode.MODE_SWITCH
-    )
-    return switches, tuple((e.t, e.code.name.lower(), e.terminal) for e in events)
+    switch = int(EventCode.MODE_SWITCH)
+    switches = tuple((r[0], int(r[2]), int(r[3])) for r in rows if int(r[1]) == switch)
+    return switches, tuple((r[0], EVENT_NAMES[int(r[1])], bool(r[4])) for r in rows)
+
+
+def _event_rows(sim, i: int) -> list:
+    """Row ``i``'s events of the last period as lists (t, code, from, to, terminal)."""
+    return sim.events[i, : sim.n_events[i]].tolist()
 
 
 class EnvCore:
@@ -297,12 +307,13 @@ class EnvCore:
         self._any_reason = bool(terminated[0] if self.n == 1 else terminated.any())
         if not self._any_reason:
             return
-        for i in np.flatnonzero(terminated):
-            if sim.status[i] == STATUS_TERMINATED:  # the terminal event names it
-                reasons[i] = next(e.code.name.lower() for e in sim.events_of(int(i)) if e.terminal)
-            elif sim.status[i] == STATUS_NONFINITE:
+        for i in (0,) if self.n == 1 else np.flatnonzero(terminated).tolist():
+            status = sim.status.item(i)
+            if status == STATUS_TERMINATED:  # the terminal event names it
+                reasons[i] = next(EVENT_NAMES[int(r[1])] for r in _event_rows(sim, i) if r[4])
+            elif status == STATUS_NONFINITE:
                 reasons[i] = TERMINATION_NON_FINITE
-            elif self.buf.fell[i]:
+            elif self.buf.fell.item(i):
                 reasons[i] = TERMINATION_FALL
             else:  # a learning termination
                 reasons[i], self._ended_by[i] = self._ended_by[i], None
@@ -340,8 +351,8 @@ class EnvCore:
         sim, one = self.sim, row is not None
         if one:
             mode, side, steps, _ = sim.ist[row].tolist()
-            events = sim.events_of(row) if sim.n_events[row] else ()
-            switches, events = event_infos(events) if events else ((), ())
+            switches, events = event_infos(_event_rows(sim, row)) if sim.n_events[row] \
+                else ((), ())  # fmt: skip
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
                    "t": sim.fst.item(row, FS_T), "hip_y": self.hip.item(row, 0),
                    "root_y": sim.fst.item(row, FS_ROOT),
@@ -357,7 +368,7 @@ class EnvCore:
             switches[:] = [()] * self.n
             events[:] = [()] * self.n
             for i in np.flatnonzero(sim.n_events[: self.n]):
-                switches[i], events[i] = event_infos(sim.events_of(int(i)))
+                switches[i], events[i] = event_infos(_event_rows(sim, i))
             mode, side, steps = sim.ist[:, :3].T.copy()  # ST_MODE, ST_SIDE, ST_STEPS: 0, 1, 2
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
                    "t": sim.fst[:, FS_T].copy(), "hip_y": self.hip[:, 0].copy(),

@@ -81,7 +81,7 @@ def midstride_start(
     [rad] and the thigh's forward turning rate [rad/s], the swing foot kept level.
     """
     values = (rate, theta0, lean, swing, knee, swing_rate)
-    if not all(math.isfinite(v) for v in values) or theta0 > 0:
+    if not math.isfinite(sum(values)) or theta0 > 0:  # a NaN or inf makes the sum one
         raise ValueError(f"need finite values and theta0 <= 0, got {values}")
     q1 = -lean - theta0
     q2 = 0.05
@@ -206,15 +206,20 @@ def draw_starts(
     ValueError, naming ``reset_noise_scale``, if a slot finds no valid start.
     """
     idx = np.asarray(idx, np.int64)
-    todo = np.arange(idx.shape[0])
-    modes = np.empty(idx.shape[0], np.int64)
+    rows = idx.tolist()
+    todo = list(range(len(rows)))
+    modes = np.empty(len(rows), np.int64)
+    q, qd = sim.q, sim.qd
     for _ in range(MAX_START_DRAWS):
         for k in todo:
-            i = idx[k]
-            sim.q[i], sim.qd[i], modes[k] = sample_start(rngs[k], start, posture, noise_scale)
-        low = start_slots(params, options, sim, idx[todo], modes[todo])
-        todo = todo[low < -POSITION_TOLERANCE_M]
-        if todo.size == 0:
+            i = rows[k]
+            q[i], qd[i], modes[k] = sample_start(rngs[k], start, posture, noise_scale)
+        if len(todo) == len(rows):
+            low = start_slots(params, options, sim, idx, modes)
+        else:
+            low = start_slots(params, options, sim, idx[todo], modes[todo])
+        todo = [k for k, z in zip(todo, low.tolist(), strict=True) if z < -POSITION_TOLERANCE_M]
+        if not todo:
             return
     raise ValueError(
         f"no start above the ground in {MAX_START_DRAWS} draws (lowest z {low.min():.3g} m): "
@@ -234,8 +239,10 @@ def start_slots(
     For searches that score a start below the ground instead of refusing it.
     """
     idx = np.asarray(idx, np.int64)
-    mode_of = np.empty(idx.shape[0], np.int64)
-    mode_of[:] = int(Mode.FOOT_FLAT) if modes is None else modes
+    if modes is None:
+        mode_of = np.full(idx.shape[0], int(Mode.FOOT_FLAT), np.int64)
+    else:
+        mode_of = np.asarray(modes, np.int64)
     chs, scs = params.packed
     iopt, fopt, _, _ = options.packed
     return nb_start_batch(
