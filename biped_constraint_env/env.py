@@ -217,6 +217,23 @@ class ConstrainedBipedEnv(gym.Env):
     contact clock), plus 1 per completed step; each target is a setting
     (``reward={"kind": "gait", "targets": {"speed": 0.8}}``).
 
+    ## Info
+    ``info`` of every step and reset: ``mode`` (1-4), ``stance_side``, ``steps_completed``,
+    ``t`` [s], ``hip_y`` and ``root_y`` [m], ``switches`` ((t, from, to) of the period's model
+    switches), ``events`` ((t, name, terminal) of each), ``termination_reason`` (None while it
+    goes on), ``motor_work_pos_j``, ``motor_work_abs_j`` and ``damping_loss_j`` (since the
+    episode's start, summed at every physics step: the motors' positive and absolute work and
+    the joint damping's loss [J]), then ``reward_<term>`` of the reward's kind (they add up to
+    the reward), and where the settings ask for them ``torque`` (PD actions: the period's
+    time-mean torque), ``push_impulse_ns`` and ``push_dv_m_s`` (pushes), ``command_m_s``.
+
+    ## Vector env
+    ``gym.make_vec("ConstrainedBiped-v0", num_envs=N, vectorization_mode="vector_entry_point",
+    **kwargs)`` takes the same arguments and steps all N rows in one compiled call, row i
+    seeded s + i equal to the single env seeded s + i, bit for bit; next-step or same-step
+    autoreset (a start drawn below the ground is drawn again, in both envs); ``num_threads``
+    numba threads (default 1), ``max_episode_steps`` a limit in periods.
+
     ## Version History
     * v0 (unreleased, the only id): accurate physics and the walking task by default; the
       paper's setting is ``task="paper"``. Changed: a preset's substeps now scale with ``dt``
