@@ -59,35 +59,35 @@ N_REWARD_OUT = N_RECORD
 
 
 @njit(cache=True)
-def _period_range(
-    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, TGT, RATE, pcfg, lo, hi,
-):  # fmt: skip
-    """:func:`nb_env_period` for rows lo..hi-1, one workspace."""
-    _period_rows(
-        CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
-        cfg, REW, FELL, TGT, RATE, pcfg, lo, hi, nb_make_work(), nb_make_scratch(),
-        np.empty((N_LINKS, NK)), np.empty((4, N_ACTUATED)), np.empty((EV.shape[1], EV.shape[2])),
-        np.empty(N_ACTUATED), np.empty(N_ACTUATED),
+def _period_range(robot, state, numerics, io, cfgs, lo, hi):
+    """:func:`nb_env_period` for rows lo..hi-1, one workspace (the bundles: its docstring)."""
+    EV = state[4]
+    work = (
+        nb_make_work(), nb_make_scratch(), np.empty((N_LINKS, NK)), np.empty((4, N_ACTUATED)),
+        np.empty((EV.shape[1], EV.shape[2])), np.empty(N_ACTUATED), np.empty(N_ACTUATED),
     )  # fmt: skip
+    _period_rows(robot, state, numerics, io, cfgs, lo, hi, work)
 
 
 @njit_noalloc
-def _pd_period(
-    chs, scs, q, qd, ist, fst, base, rate, pcfg, dt, iopt, fopt, a, b, ev, forces, W, S, table,
-    evs, tau, act, tgt,
-):  # fmt: skip
+def _pd_period(row, pd, numerics, work):
     """One control period of PD targets: the PD law at each of ``pcfg[0]`` physics steps.
 
-    The action ``act`` (5,) in [-1, 1] sets the targets ``tgt`` = ``base`` + range x act
+    ``row``: the row's (chs, scs, q, qd, ist, fst, ev, forces); ``pd``: (base, rate, pcfg,
+    act, tgt); ``numerics``: (dt, iopt, fopt, a, b); ``work``: (W, S, table, evs, tau). The
+    action ``act`` (5,) in [-1, 1] sets the targets ``tgt`` = ``base`` + range x act
     (:func:`~.actions.nb_pd_targets`); they and their rates ``rate`` (5,) hold over the
-    period; before every
-    physics step of dt / n the torques are :func:`~.actions.nb_pd_torques` of the current
-    state (the same in every model). A terminal event ends the period, and so does a model
-    switch when the options stop at switches. ``act`` (5,) receives the time-mean torque
-    [N m]; returns (status, events, time-mean of sum(tau^2) [N^2 m^2]). Events of all the
-    physics steps are collected in ``ev`` (``evs``: a scratch of its shape).
+    period; before every physics step of dt / n the torques are
+    :func:`~.actions.nb_pd_torques` of the current state (the same in every model). A
+    terminal event ends the period, and so does a model switch when the options stop at
+    switches. ``act`` (5,) receives the time-mean torque [N m]; returns (status, events,
+    time-mean of sum(tau^2) [N^2 m^2]). Events of all the physics steps are collected in
+    ``ev`` (``evs``: a scratch of its shape).
     """
+    chs, scs, q, qd, ist, fst, ev, forces = row
+    base, rate, pcfg, act, tgt = pd
+    dt, iopt, fopt, a, b = numerics
+    W, S, table, evs, tau = work
     n_sub = int(pcfg[PCFG_NSUB])
     h = dt / n_sub
     stop_at_switch = iopt[IO_STOP_AT_SWITCH] != 0
@@ -135,16 +135,19 @@ def _pd_period(
 
 
 @njit_noalloc
-def _period_rows(
-    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, TGT, RATE, pcfg, lo, hi, W, S, K, table, evs, tau, tgt,
-):  # fmt: skip
+def _period_rows(robot, state, numerics, io, cfgs, lo, hi, work):
     """The rows' loop of :func:`_period_range`, given its workspaces.
 
-    W, S: :func:`~.hybrid.nb_make_work`, :func:`~.simulator.nb_make_scratch`; K (6, NK): the
-    observation's kinematics; table (4, 5): the torque table (the action holds in every model);
-    evs, tau: scratch of the PD period (:func:`_pd_period`).
+    ``work``: (W, S, K, table, evs, tau, tgt): :func:`~.hybrid.nb_make_work`,
+    :func:`~.simulator.nb_make_scratch`, K (6, NK) the observation's kinematics, table (4, 5)
+    the torque table (the action holds in every model), and the PD period's scratch.
     """
+    CHS, SCS = robot
+    Q, QD, IST, FST, EV, FORCES, STATUS, NEV = state
+    dt, iopt, fopt, a, b = numerics
+    ACT, OBS, HIP, REW, FELL, TGT, RATE = io
+    cfg, pcfg, acfg = cfgs
+    W, S, K, table, evs, tau, tgt = work
     pd = pcfg[PCFG_NSUB] > 0
     for i in range(lo, hi):
         chs = CHS[i]  # the row's robot (its own masses, damping, K: model randomisation)
@@ -155,8 +158,8 @@ def _period_rows(
         tau_sq = -1.0  # torque actions: the reward squares ACT[i]
         if STATUS[i] == STATUS_OK and pd:
             STATUS[i], NEV[i], tau_sq = _pd_period(
-                chs, scs, Q[i], QD[i], IST[i], FST[i], TGT[i], RATE[i], pcfg, dt, iopt, fopt,
-                a, b, EV[i], FORCES[i], W, S, table, evs, tau, ACT[i], tgt,
+                (chs, scs, Q[i], QD[i], IST[i], FST[i], EV[i], FORCES[i]),
+                (TGT[i], RATE[i], pcfg, ACT[i], tgt), numerics, (W, S, table, evs, tau),
             )  # fmt: skip
         elif STATUS[i] == STATUS_OK:
             for m in range(4):
@@ -201,53 +204,45 @@ def _period_rows(
 
 
 @njit(cache=True)
-def nb_env_period(
-    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, TGT, RATE, pcfg, acfg,
-):  # fmt: skip
+def nb_env_period(robot, state, numerics, io, cfgs):
     """One control period of N environments (rows), serially; 0, or 1 if a torque is refused.
 
-    CHS (n, 2, 6, 6), SCS (n, 2, 8): each row's packed robot (:attr:`~.model.BipedParams.packed`;
-    rows differ under model randomisation).
+    Its arrays come in five bundles:
 
-    ACT (n, 5), the actions (torques [N m], held over the period in every model), is checked
-    (and clipped) first, every row, by :func:`~.actions.nb_check_torques` with ``acfg``; if it
-    refuses one, nothing else is done and 1 is returned. Arguments: the simulator's
-    (:func:`~.simulator.nb_advance_batch`, with ACT for its torque tables), then OBS (n, 24)
-    and HIP (n, 4), the observation and hip kinematics, read before (progress) and written
-    after the period; cfg, :func:`~.rewards.reward_config`; REW (n, 12), written: the
-    per-period record (:data:`~.rewards.N_RECORD`; zeros for rows whose STATUS is negative:
-    resetting, not stepped);
-    FELL (n,), written: 1 where the hip fell below the fall height in this period; TGT, RATE
-    (n, 5): the PD targets' base [rad] and rates [rad/s], and pcfg
-    (:func:`~.actions.pd_config`), for PD-target actions (``pcfg[0] > 0``: ACT holds the
-    actions in [-1, 1] and is then written, the time-mean torque of each row); acfg: the
-    actions' bound and clipping. Rows with STATUS != 0 are not advanced.
+    * ``robot`` (CHS (n, 2, 6, 6), SCS (n, 2, 8)): each row's packed robot
+      (:attr:`~.model.BipedParams.packed`; rows differ under model randomisation);
+    * ``state`` (Q, QD, IST, FST, EV, FORCES, STATUS, NEV): the simulator's arrays
+      (:class:`~.simulator.SimArrays`); rows with STATUS != 0 are not advanced;
+    * ``numerics`` (dt, iopt, fopt, a, b): the control period [s] and the packed
+      :class:`~.options.SimOptions`;
+    * ``io`` (ACT, OBS, HIP, REW, FELL, TGT, RATE): ACT (n, 5), the actions (torques [N m],
+      held over the period in every model; PD targets in [-1, 1] when ``pcfg[0] > 0``, then
+      written: each row's time-mean torque); OBS (n, 24) and HIP (n, 4), the observation and
+      hip kinematics, read before (progress) and written after the period; REW (n, 12), written:
+      the per-period record (:data:`~.rewards.N_RECORD`; zeros for rows whose STATUS is
+      negative: resetting, not stepped); FELL (n,), written: 1 where the hip fell below the
+      fall height; TGT, RATE (n, 5): the PD targets' base [rad] and rates [rad/s];
+    * ``cfgs`` (cfg, pcfg, acfg): :func:`~.rewards.reward_config`,
+      :func:`~.actions.pd_config`, :func:`~.actions.action_config`.
+
+    ACT is checked (and clipped) first, every row, by :func:`~.actions.nb_check_torques` with
+    ``acfg``; if it refuses one, nothing else is done and 1 is returned.
     """
-    if nb_check_torques(ACT, acfg) != 0:
+    if nb_check_torques(io[0], cfgs[2]) != 0:
         return 1
-    _period_range(
-        CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP,
-        cfg, REW, FELL, TGT, RATE, pcfg, 0, Q.shape[0],
-    )  # fmt: skip
+    _period_range(robot, state, numerics, io, cfgs, 0, state[0].shape[0])
     return 0
 
 
 @njit(cache=True, parallel=True)
-def nb_env_period_parallel(
-    CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS, HIP, cfg,
-    REW, FELL, TGT, RATE, pcfg, acfg, nt,
-):  # fmt: skip
+def nb_env_period_parallel(robot, state, numerics, io, cfgs, nt):
     """:func:`nb_env_period` split into ``nt`` chunks of rows, one per thread (same results)."""
-    if nb_check_torques(ACT, acfg) != 0:
+    if nb_check_torques(io[0], cfgs[2]) != 0:
         return 1
-    n = Q.shape[0]
+    n = state[0].shape[0]
     chunk = (n + nt - 1) // nt
     for c in numba.prange(nt):
-        _period_range(
-            CHS, SCS, Q, QD, IST, FST, ACT, dt, iopt, fopt, a, b, EV, FORCES, STATUS, NEV, OBS,
-            HIP, cfg, REW, FELL, TGT, RATE, pcfg, c * chunk, min(n, (c + 1) * chunk),
-        )  # fmt: skip
+        _period_range(robot, state, numerics, io, cfgs, c * chunk, min(n, (c + 1) * chunk))
     return 0
 
 
@@ -299,10 +294,12 @@ class EnvBuffers:
         iopt, fopt, a, b = options.packed
         s = self.sim
         self._args = (
-            self.chs, self.scs, s.q, s.qd, s.ist, s.fst, self.act, float(dt), iopt, fopt, a, b,
-            s.events, s.forces, s.status, s.n_events, self.obs, self.hip, cfg, self.rew, self.fell,
-            self.tgt, self.rate, self.pcfg, acfg,
-        )  # fmt: skip
+            (self.chs, self.scs),
+            (s.q, s.qd, s.ist, s.fst, s.events, s.forces, s.status, s.n_events),
+            (float(dt), iopt, fopt, a, b),
+            (self.act, self.obs, self.hip, self.rew, self.fell, self.tgt, self.rate),
+            (cfg, self.pcfg, acfg),
+        )  # a few bundles (nb_env_period)
         self.num_threads = int(num_threads)
         self._parallel = n >= PARALLEL_MIN_BATCH and self.num_threads > 1
         self._observe_args = (
