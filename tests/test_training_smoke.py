@@ -196,8 +196,11 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     run0, run1 = sorted((tmp_path / "train_ppo").iterdir())
     cfg = read_config(run0)
     s = cfg.settings()
-    assert s.action.pd and s.reward.kind == "tracking" and cfg.train_env["start"]["rsi"] > 0
-    assert cfg.env_kwargs()["start"]["rsi"] == 0.0 and cfg.train_env_kwargs()["start"]["rsi"] == 0.5
+    from biped_constraint_env.settings import make_settings
+
+    train = make_settings(**cfg.train_env_kwargs())
+    assert s.action.pd and s.reward.kind == "tracking" and train.start.rsi == 0.5
+    assert cfg.env_kwargs()["start"]["rsi"] == 0.0 and s.start.rsi == 0.0  # task "track"
     assert s.action.offset[1][0] > 0 and read_config(run1).train_env == {"start": {"rsi": 0}}
     kinds = [{type(m).__name__ for m in load_policy(r)[0].modules()} for r in (run0, run1)]
     assert "Tanh" in kinds[0] and "ReLU" not in kinds[0] and "ReLU" in kinds[1]
@@ -218,7 +221,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     assert [r["training_seed"] for r in rows] == [0, 1]
     assert rows[1]["changes"] == "train_env.start={'rsi': 0}, activation='relu'"
     assert "PD" in rows[0]["in_the_loop"]
-    assert all(kw["action"]["kind"] == "pd" and kw["start"]["rsi"] == 0.0 for kw in seen)
+    assert all(kw["task"] == "track" and kw["start"]["rsi"] == 0.0 for kw in seen)
 
 
 @pytest.mark.parametrize(
@@ -393,9 +396,7 @@ def test_env_table_flags_go_on_top_of_the_config_table():
     cfg = parse_config(PPOConfig, ["--config", "training/configs/ppo_from_scratch.toml",
                                    "--env", "dt=0.02", 'start="rest"'], "")  # fmt: skip
     assert cfg.env["dt"] == 0.02 and cfg.env["start"] == "rest"
-    assert cfg.env["reward"] == "tracking" and cfg.train_env == {
-        "start": {"rsi": 0.5}
-    }  # the file's
+    assert cfg.env["task"] == "track" and cfg.train_env == {}  # the file's
     assert cfg.settings().dt == 0.02 and cfg.settings().action.pd
     import tomllib
 
@@ -404,3 +405,23 @@ def test_env_table_flags_go_on_top_of_the_config_table():
         parse_config(PPOConfig, ["--env", "dt=-1"], "")
     with pytest.raises(SystemExit, match="KEY=VALUE"):
         parse_config(PPOConfig, ["--env", "dt"], "")
+
+
+def test_a_recipe_is_its_base_plus_its_own_settings(tmp_path):
+    """``base = "ppo_base.toml"``: the recipe's values on top of the base's, tables key by key;
+    a base must be a file name in the recipe's folder, with no base of its own."""
+    from training.plumbing.common import parse_config
+    from training.ppo.config import PPOConfig
+
+    (tmp_path / "b.toml").write_text('n_envs = 8\ngamma = 0.9\n[env]\ndt = 0.02\nstart = "rest"\n')
+    (tmp_path / "r.toml").write_text('base = "b.toml"\ngamma = 0.95\n[env]\nstart = "mixed"\n')
+    cfg = parse_config(PPOConfig, ["--config", str(tmp_path / "r.toml")], "")
+    assert (cfg.n_envs, cfg.gamma, cfg.env) == (8, 0.95, {"dt": 0.02, "start": "mixed"})
+    for bad, why in (('"../b.toml"', "a file name in the same folder"),
+                     ('"/etc/passwd"', "a file name in the same folder"),
+                     ('"r.toml"', "a base names no base of its own")):  # fmt: skip
+        (tmp_path / "x.toml").write_text(f"base = {bad}\n")
+        with pytest.raises(SystemExit, match=why):
+            parse_config(PPOConfig, ["--config", str(tmp_path / "x.toml")], "")
+    shipped = parse_config(PPOConfig, ["--config", "training/configs/ppo_gait_50hz.toml"], "")
+    assert shipped.n_envs == 64 and shipped.gamma == 0.98  # base, then its own

@@ -259,21 +259,50 @@ def _parser(cls: type, description: str) -> argparse.ArgumentParser:
     return parser
 
 
+TABLE_FIELDS = ("env", "train_env")
+"""Config tables that a recipe file merges key by key onto its base's."""
+
+
+def read_config_file(path: Path) -> dict[str, Any]:
+    """A recipe TOML file's values, on top of its ``base`` file's when it names one.
+
+    ``base = "ppo_base.toml"``: a file name in the same folder (no path), itself without a
+    base; the recipe's values replace the base's, its ``[env]`` and ``[train_env]`` entries
+    key by key. The merged values are what a run saves (its config has no ``base``).
+    """
+    from training.plumbing.safe_files import read_toml
+
+    own = read_toml(path)
+    base_name = own.pop("base", None)
+    if base_name is None:
+        return own
+    if not isinstance(base_name, str) or Path(base_name).name != base_name or not base_name:
+        raise ValueError(f"{path}: base must be a file name in the same folder, got {base_name!r}")
+    base = read_toml(path.parent / base_name)
+    if "base" in base:
+        raise ValueError(f"{path.parent / base_name}: a base names no base of its own")
+    merged = {**base, **own}
+    for table in TABLE_FIELDS:
+        if table in base or table in own:
+            merged[table] = {**base.get(table, {}), **own.get(table, {})}
+    return merged
+
+
 def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> C:
     """Build ``cls`` from defaults, an optional TOML file and CLI flags (in that precedence).
 
     Every refusal (a missing or malformed file, an unknown key, a value of the wrong type or
     out of range) is one line from argparse (exit status 2), before anything is written.
     """
-    from training.plumbing.safe_files import UntrustedFileError, read_toml
+    from training.plumbing.safe_files import UntrustedFileError
 
     parser = _parser(cls, description)
     args = parser.parse_args(argv)
     values: dict[str, Any] = {}
     if args.config is not None:
         try:
-            values.update(read_toml(args.config))
-        except UntrustedFileError as e:
+            values.update(read_config_file(Path(args.config)))
+        except (UntrustedFileError, ValueError) as e:
             parser.error(f"--config: {e}")
     hints = get_type_hints(cls)
     try:
