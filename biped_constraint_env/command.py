@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from .gait import SWING_MODELS, GaitReward
-from .rewards import REWARD_KINDS
+from .gait import SWING_MODELS, GaitReward, height_term, kernel
+from .rewards import REWARD_KINDS, RewardTerm
 from .validation import check_mapping, check_real
 
 MAX_COMMAND_M_S = 5.0
@@ -47,8 +47,6 @@ COMMAND_OBS_HIGH = np.array([MAX_COMMAND_M_S])
 MAX_STRETCH = 3.0
 """The most a slow command stretches the cadence targets (a command of a third of the speed
 target and below)."""
-COMMAND_TERMS = tuple(t.name for t in REWARD_KINDS["command"])
-"""The command reward's terms, in order."""
 
 
 @dataclass(frozen=True)
@@ -157,31 +155,57 @@ class Commands:
         return self.v[:, None]
 
 
+def command_speed_term(r, p) -> np.ndarray:
+    """The period's mean hip speed against the command (at zero: standing still)."""
+    return kernel(r, "speed", p.speed - p.command)
+
+
+def command_swing_term(r, p) -> np.ndarray:
+    """Models 1, 2: the swing ankle carried forward at least at the command; models 3, 4: 1."""
+    short = np.minimum(p.swing_vy - p.command, 0.0)
+    return np.where(np.isin(p.modes, SWING_MODELS), kernel(r, "swing", short), 1.0)
+
+
+def command_cadence_term(r, p) -> np.ndarray:
+    """The contact clock against targets stretched at slow commands; 1 at a zero command."""
+    moving = p.command > 0.0
+    speed = r.targets["speed"]
+    stretch = np.where(moving, np.minimum(MAX_STRETCH, speed / np.where(moving, p.command, 1.0)),
+                       1.0)  # fmt: skip
+    stretch = np.maximum(stretch, 1.0)
+    over = np.maximum(p.model_time_s - r.cadence[p.modes] * stretch, 0.0)
+    return np.where(moving, kernel(r, "cadence", over), 1.0)
+
+
+def command_steps_term(r, p) -> np.ndarray:
+    """The steps completed, each paid min(1, command / speed target) (none at zero)."""
+    return np.clip(p.command / r.targets["speed"], 0.0, 1.0) * p.steps
+
+
+REWARD_KINDS["command"] = (
+    RewardTerm("speed", 0.4, 4.0, target=1.1, value=command_speed_term, gated=True,
+               doc="kernel of (the period's mean hip speed - the command [m/s])^2; the target: "
+                   "the speed the cadence targets are made for"),
+    RewardTerm("height", 0.2, 50.0, target=2.95, value=height_term, gated=True,
+               doc="kernel of (hip height - target [m])^2"),
+    RewardTerm("swing", 0.2, 1.0, value=command_swing_term, gated=True,
+               doc="models 1, 2: kernel of min(0, swing ankle speed - the command [m/s])^2; "
+                   "models 3, 4: the weight"),
+    RewardTerm("cadence", 0.2, 50.0, target=(0.6, 0.25, 0.15, 0.1), per_model=True,
+               value=command_cadence_term, gate=True,
+               doc="kernel of max(0, time in the model - target x stretch [s])^2, stretched at "
+                   "slow commands; the weight at a zero command"),
+    RewardTerm("step", 10.0, value=command_steps_term, per_period=False,
+               doc="weight x min(1, command / speed target) per step"),
+)  # fmt: skip
+COMMAND_TERMS = tuple(t.name for t in REWARD_KINDS["command"])
+"""The command reward's terms, in order."""
+
+
 class CommandReward(GaitReward):
-    """The command reward of N rows (see the module docstring), after each period."""
+    """The command reward of N rows (see the module docstring).
+
+    The gait machinery over the command's terms, each period against the command it ran under.
+    """
 
     KIND = "command"
-
-    def terms(self, command, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive):
-        """(n, 6): the terms (COMMAND_TERMS order) and their sum, after a period."""
-        w, k, speed = self._w, self._k, self._target["speed"]
-        out = np.empty((len(progress_m), len(COMMAND_TERMS) + 1))
-        out[:, 0] = w["speed"] * np.exp(-k["speed"] * (progress_m / self.dt - command) ** 2)
-        out[:, 1] = w["height"] * np.exp(-k["height"] * (hip_z - self._target["height"]) ** 2)
-        short = np.minimum(swing_vy - command, 0.0)
-        free = np.isin(modes, SWING_MODELS)
-        out[:, 2] = np.where(free, w["swing"] * np.exp(-k["swing"] * short**2), w["swing"])
-        moving = command > 0.0
-        stretch = np.where(
-            moving, np.minimum(MAX_STRETCH, speed / np.where(moving, command, 1.0)), 1.0
-        )
-        stretch = np.maximum(stretch, 1.0)
-        over = np.maximum(model_time_s - self._cadence[modes] * stretch, 0.0)
-        on_time = np.where(moving, np.exp(-k["cadence"] * over**2), 1.0)
-        out[:, 3] = w["cadence"] * on_time
-        if self._gated:
-            out[:, :3] *= on_time[:, None]
-        out[~alive, :4] = 0.0
-        out[:, 4] = w["step"] * np.clip(command / speed, 0.0, 1.0) * steps
-        out[:, 5] = out[:, :5].sum(axis=1)
-        return out

@@ -24,21 +24,89 @@ ended by an event earns only its steps. The single and the batched env compute i
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from .rewards import REWARD_KINDS, RewardSettings
+from .rewards import REWARD_KINDS, RewardSettings, RewardTerm
 
 SWING_MODELS = (1, 2)
 """The models in which the swing leg is free (its foot off the ground)."""
+
+
+@dataclass(frozen=True)
+class Period:
+    """A control period's inputs of the gait and command terms, one entry per row.
+
+    ``speed``: the hip's mean forward speed [m/s] (progress / dt); ``hip_z`` [m]; ``swing_vy``:
+    the swing ankle's forward speed [m/s]; ``modes``: the models after it; ``model_time_s``: the
+    time since the current model began [s]; ``steps``: steps completed in it; ``command``: the
+    commanded speeds [m/s] it ran under (None: the gait reward's constant target).
+    """
+
+    speed: np.ndarray
+    hip_z: np.ndarray
+    swing_vy: np.ndarray
+    modes: np.ndarray
+    model_time_s: np.ndarray
+    steps: np.ndarray
+    command: np.ndarray | None = None
+
+
+def kernel(reward, name: str, error) -> np.ndarray:
+    """exp(-kernel * error^2) with the term ``name``'s kernel."""
+    return np.exp(-reward.kernels[name] * error**2)
+
+
+def speed_term(r, p: Period) -> np.ndarray:
+    """The period's mean hip speed against the speed target."""
+    return kernel(r, "speed", p.speed - r.targets["speed"])
+
+
+def height_term(r, p: Period) -> np.ndarray:
+    """The hip height against its target (no crouch, no vault)."""
+    return kernel(r, "height", p.hip_z - r.targets["height"])
+
+
+def swing_term(r, p: Period) -> np.ndarray:
+    """Models 1, 2: the swing ankle carried forward at least at the target; models 3, 4: 1."""
+    short = np.minimum(p.swing_vy - r.targets["swing"], 0.0)
+    return np.where(np.isin(p.modes, SWING_MODELS), kernel(r, "swing", short), 1.0)
+
+
+def cadence_term(r, p: Period) -> np.ndarray:
+    """The time held in the current model against its model's target (the contact clock)."""
+    return kernel(r, "cadence", np.maximum(p.model_time_s - r.cadence[p.modes], 0.0))
+
+
+def steps_term(r, p: Period) -> np.ndarray:
+    """The steps completed in the period."""
+    return p.steps
+
+
+REWARD_KINDS["gait"] = (
+    RewardTerm("speed", 0.4, 0.5, target=1.1, value=speed_term, gated=True,
+               doc="kernel of (the period's mean hip speed - target [m/s])^2"),
+    RewardTerm("height", 0.2, 50.0, target=2.95, value=height_term, gated=True,
+               doc="kernel of (hip height - target [m])^2"),
+    RewardTerm("swing", 0.2, 1.0, target=1.0, value=swing_term, gated=True,
+               doc="models 1, 2: kernel of min(0, swing ankle speed - target [m/s])^2; "
+                   "models 3, 4: the weight"),
+    RewardTerm("cadence", 0.2, 10.0, target=0.7, per_model=True, value=cadence_term, gate=True,
+               doc="kernel of max(0, time in the current model - target [s])^2; the target one "
+                   "value or one per model (1-4)"),
+    RewardTerm("step", 1.0, value=steps_term, per_period=False,
+               doc="weight per completed walking step"),
+)  # fmt: skip
 GAIT_TERMS = tuple(t.name for t in REWARD_KINDS["gait"])
-"""The gait reward's terms, in order."""
+"""The gait reward's terms, in order (a new one is one entry above: its spec and function)."""
 
 
 class GaitReward:
     """The gait reward of N rows: its weights, kernels and targets, and its terms per period.
 
-    The command reward (:class:`~.command.CommandReward`) shares this state and differs in
-    :meth:`terms` only.
+    The command reward (:class:`~.command.CommandReward`) is the same machinery over its own
+    named terms (:attr:`KIND`).
     """
 
     KIND = "gait"
@@ -48,37 +116,38 @@ class GaitReward:
         if reward.kind != self.KIND:
             raise ValueError(f"{type(self).__name__} takes the {self.KIND!r} reward, "
                              f"not {reward.kind!r}")  # fmt: skip
+        self.specs = REWARD_KINDS[self.KIND]
         names = reward.terms
         self.dt = float(dt)
-        self._w = {t: reward.weight(t) for t in names}
-        self._k = {t: reward.kernel(t) for t in names if t != "step"}
-        self._target = {t: reward.target(t) for t in names
+        self.weights = {t: reward.weight(t) for t in names}
+        self.kernels = {t: reward.kernel(t) for t in names}
+        self.targets = {t: reward.target(t) for t in names
                         if t != "cadence" and reward.target(t) is not None}  # fmt: skip
-        self._cadence = np.zeros(5)  # indexed by the model, 1-4
-        self._cadence[1:] = reward.target("cadence")
+        self.cadence = np.zeros(5)  # indexed by the model, 1-4
+        self.cadence[1:] = reward.target("cadence")
         self._gated = reward.gated
+        self._live = [c for c, t in enumerate(self.specs) if t.per_period]
 
-    def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive):
-        """(n, 6): the terms (GAIT_TERMS order) and their sum, after a period.
+    def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive, command=None):
+        """(n, k + 1): the terms (the kind's order) and their sum, after a period.
 
-        ``progress_m``: the hip's forward progress in the period [m]; ``hip_z`` [m];
-        ``swing_vy``: the swing ankle's forward speed [m/s]; ``modes``: the models after it;
-        ``model_time_s``: the time since the current model began [s]; ``steps``: steps completed
-        in the period; ``alive``: periods not ended by an event (the others earn only steps).
+        ``progress_m``: the hip's forward progress in the period [m]; ``alive``: periods not
+        ended by an event (the others earn only the terms not ``per_period``: the steps); the
+        rest as :class:`Period`'s.
         """
-        w, k, tg = self._w, self._k, self._target
-        out = np.empty((len(progress_m), len(GAIT_TERMS) + 1))
-        out[:, 0] = w["speed"] * np.exp(-k["speed"] * (progress_m / self.dt - tg["speed"]) ** 2)
-        out[:, 1] = w["height"] * np.exp(-k["height"] * (hip_z - tg["height"]) ** 2)
-        short = np.minimum(swing_vy - tg["swing"], 0.0)
-        free = np.isin(modes, SWING_MODELS)
-        out[:, 2] = np.where(free, w["swing"] * np.exp(-k["swing"] * short**2), w["swing"])
-        over = np.maximum(model_time_s - self._cadence[modes], 0.0)
-        on_time = np.exp(-k["cadence"] * over**2)
-        out[:, 3] = w["cadence"] * on_time
-        if self._gated:
-            out[:, :3] *= on_time[:, None]
-        out[~alive, :4] = 0.0
-        out[:, 4] = w["step"] * steps
-        out[:, 5] = out[:, :5].sum(axis=1)
+        p = Period(progress_m / self.dt, hip_z, swing_vy, modes, model_time_s, steps, command)
+        out = np.empty((len(progress_m), len(self.specs) + 1))
+        gate = None
+        for c, t in enumerate(self.specs):
+            value = t.value(self, p)
+            out[:, c] = self.weights[t.name] * value
+            if t.gate:
+                gate = value
+        if self._gated and gate is not None:
+            for c, t in enumerate(self.specs):
+                if t.gated:
+                    out[:, c] *= gate
+        if not alive.all():
+            out[np.ix_(~alive, self._live)] = 0.0
+        out[:, -1] = out[:, :-1].sum(axis=1)
         return out

@@ -17,6 +17,7 @@ the reward. Shared by both envs.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,6 +49,16 @@ class RewardTerm:
     target: float | None = None
     per_model: bool = False
     """The target may be one value per model (1-4) instead of one for all."""
+    value: Callable | None = None
+    """``value(reward, period) -> (n,)``: the term before its weight, for the kinds computed
+    in Python from the per-period record (gait, command); None where the compiled period
+    (env) or the reference (tracking) computes it."""
+    gated: bool = False
+    """Multiplied by the gate term's value when the reward is ``gated``."""
+    gate: bool = False
+    """The term whose value gates the others (the contact clock's kernel)."""
+    per_period: bool = True
+    """Zero for a period ended by an event (False: the steps, earned however it ended)."""
 
 
 REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
@@ -65,64 +76,10 @@ REWARD_KINDS: dict[str, tuple[RewardTerm, ...]] = {
         RewardTerm("hip_speed", 0.2, 5.0, "kernel of the hip speed's squared error [(m/s)^2]"),
         RewardTerm("step", 1.0, doc="weight per completed walking step"),
     ),
-    "gait": (
-        RewardTerm(
-            "speed",
-            0.4,
-            0.5,
-            target=1.1,
-            doc="kernel of (the period's mean hip speed - target [m/s])^2",
-        ),
-        RewardTerm("height", 0.2, 50.0, target=2.95, doc="kernel of (hip height - target [m])^2"),
-        RewardTerm(
-            "swing",
-            0.2,
-            1.0,
-            target=1.0,
-            doc="models 1, 2: kernel of min(0, swing ankle speed - target [m/s])^2; "
-            "models 3, 4: the weight",
-        ),
-        RewardTerm(
-            "cadence",
-            0.2,
-            10.0,
-            target=0.7,
-            doc="kernel of max(0, time in the current model - target [s])^2; the target one "
-            "value or one per model (1-4)",
-            per_model=True,
-        ),
-        RewardTerm("step", 1.0, doc="weight per completed walking step"),
-    ),
-    "command": (
-        RewardTerm(
-            "speed",
-            0.4,
-            4.0,
-            target=1.1,
-            doc="kernel of (the period's mean hip speed - the command [m/s])^2; the target: the "
-            "speed the cadence targets are made for",
-        ),
-        RewardTerm("height", 0.2, 50.0, target=2.95, doc="kernel of (hip height - target [m])^2"),
-        RewardTerm(
-            "swing",
-            0.2,
-            1.0,
-            doc="models 1, 2: kernel of min(0, swing ankle speed - the command [m/s])^2; "
-            "models 3, 4: the weight",
-        ),
-        RewardTerm(
-            "cadence",
-            0.2,
-            50.0,
-            target=(0.6, 0.25, 0.15, 0.1),
-            doc="kernel of max(0, time in the model - target x stretch [s])^2, stretched at "
-            "slow commands; the weight at a zero command",
-            per_model=True,
-        ),
-        RewardTerm("step", 10.0, doc="weight x min(1, command / speed target) per step"),
-    ),
 }
-"""The reward kinds and their terms. The tracking kernels' weights sum to 1 (a period on the
+"""The reward kinds and their terms: "env" and "tracking" here; "gait" and "command" register
+their named term functions with them (:mod:`.gait`, :mod:`.command`), one entry per term. The
+tracking kernels' weights sum to 1 (a period on the
 reference earns 1) and each halves its term at an error of about 0.37 rad (one angle),
 3.7 rad/s, 59 mm and 0.37 m/s; a step takes about 170 periods of 5 ms. The gait kernels' weights
 sum to 1 too, with no recorded motion: its targets are round numbers of the task (a 1.1 m/s walk
@@ -370,10 +327,10 @@ class CommandRewardPart:
     def after(self, core, command, terminated, skip):
         """(terms, rewards) of the period against the command it ran under."""
         rec, sim = core.buf.rew, core.sim
-        out = core.command_reward.terms(command, rec[:, REC_PROGRESS], core.hip[:, 1],
+        out = core.command_reward.terms(rec[:, REC_PROGRESS], core.hip[:, 1],
                                         rec[:, REC_SWING_VY], sim.ist[:, ST_MODE],
                                         core.clock.model_time_s(), rec[:, REC_STEPS],
-                                        ~terminated)  # fmt: skip
+                                        ~terminated, command)  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1].copy()

@@ -77,14 +77,14 @@ def test_command_reward_follows_the_command_and_pays_standing_at_zero():
                 model_time_s=np.array([5.0, 5.0]), steps=np.zeros(2),
                 alive=np.ones(2, bool))  # fmt: skip
     # hip still, a contact phase held 5 s: at a zero command all but the steps pay in full
-    out = r.terms(np.array([0.0, 1.0]), np.zeros(2), **args)
+    out = r.terms(np.zeros(2), command=np.array([0.0, 1.0]), **args)
     assert out[0, :4].tolist() == pytest.approx([0.4, 0.2, 0.2, 0.2])
     assert out[1, 0] == 0.0 and out[1, 3] == pytest.approx(0.0, abs=1e-12)  # gated off
     # walking at the command pays the speed term in full, another speed less
     moving = dict(args, model_time_s=np.array([0.1, 0.1]))
-    out = r.terms(np.array([1.0, 1.0]), np.array([1.0, 0.6]) * s.dt, **moving)
+    out = r.terms(np.array([1.0, 0.6]) * s.dt, command=np.array([1.0, 1.0]), **moving)
     assert out[0, 0] == pytest.approx(0.4) and out[1, 0] == pytest.approx(0.4 * np.exp(-4 * 0.16))
-    out = r.terms(np.array([0.0, 2.0]), np.zeros(2), **dict(moving, steps=np.ones(2)))
+    out = r.terms(np.zeros(2), command=np.array([0.0, 2.0]), **dict(moving, steps=np.ones(2)))
     assert out[:, 4].tolist() == [0.0, 10.0]  # steps pay nothing at a zero command
     assert np.allclose(out[:, 5], out[:, :5].sum(axis=1))
 

@@ -6,6 +6,7 @@ in the single and the batched env, which agree row for row.
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env import observation, starts, terminations
@@ -114,3 +115,27 @@ def test_one_record_per_period_serves_every_reward_kind():
                 + info["reward_cadence"]
                 + info["reward_step"]
             )
+
+
+def test_a_new_reward_term_is_one_entry(monkeypatch):
+    """A term of the gait reward: its spec and function, one registry entry; it appears in
+    ``info``, its weight is a setting, and the terms still add up to the reward."""
+    from biped_constraint_env.rewards import REWARD_KINDS, RewardTerm
+
+    def upright(r, p):  # the hip no lower than 2.9 m
+        return (p.hip_z > 2.9).astype(float)
+
+    term = RewardTerm("upright", 0.5, value=upright, doc="1 while the hip is above 2.9 m")
+    monkeypatch.setitem(REWARD_KINDS, "gait", (*REWARD_KINDS["gait"], term))
+    kw = {
+        "task": "paper",
+        "preset": "default",
+        "reward": {"kind": "gait", "weights": {"upright": 0.25}},
+    }
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    env.reset(seed=0)
+    _, r, _, _, info = env.step(np.zeros(5))
+    assert info["reward_upright"] == 0.25  # at rest, upright
+    terms = [t.name for t in REWARD_KINDS["gait"]]
+    assert r == pytest.approx(sum(info[f"reward_{t}"] for t in terms), abs=1e-12)
+    _single_and_batched(kw)
