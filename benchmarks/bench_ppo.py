@@ -48,13 +48,21 @@ def _config(path: str, overrides: Sequence[str] = ()):
     return parse_config(PPOConfig, ["--config", path, *overrides], "bench")
 
 
+SHARES: dict[str, tuple[float, float]] = {}
+"""The last timing's (env share, update share) of its wall time, by row."""
+
+
 def ppo_steps_per_s(
-    cfg, steps: int, env_threads: int, update_threads: int, barrier=None, seed: int = 0
-) -> float:
+    cfg, steps: int, env_threads: int, update_threads: int, barrier=None, seed: int = 0,
+    shares: str | None = None,
+) -> float:  # fmt: skip
     """Env steps per second of PPO.learn on the batched env (rollouts and updates).
 
     ``barrier``: a multiprocessing barrier that the timed learning waits on after the warm-up
-    (two processes side by side start timing together).
+    (two processes side by side start timing together). ``shares``: a row name under which
+    the timed learning's shares of wall time go to :data:`SHARES`: the env's (the batched
+    env's steps: physics, observation, reward, resets) and PPO's updates (``model.train``); the
+    rest is the rollout's network passes and SB3's bookkeeping.
     """
     import torch
 
@@ -69,9 +77,27 @@ def ppo_steps_per_s(
         model.learn(total_timesteps=cfg.n_envs * cfg.n_steps, callback=callback)  # warm-up
         if barrier is not None:
             barrier.wait()
+        spent = {"env": 0.0, "update": 0.0}
+        inner = venv.venv  # the batched env under the VecMonitor
+        step_wait, train = inner.step_wait, model.train
+
+        def timed(what, fn):
+            def run(*args, **kwargs):
+                t = time.perf_counter()
+                try:
+                    return fn(*args, **kwargs)
+                finally:
+                    spent[what] += time.perf_counter() - t
+
+            return run
+
+        inner.step_wait, model.train = timed("env", step_wait), timed("update", train)
         t0 = time.perf_counter()
         model.learn(total_timesteps=steps, reset_num_timesteps=False, callback=callback)
-        rate = steps / (time.perf_counter() - t0)
+        wall = time.perf_counter() - t0
+        rate = steps / wall
+        if shares is not None:
+            SHARES[shares] = (spent["env"] / wall, spent["update"] / wall)
     torch.set_num_threads(1)
     venv.close()
     return rate
@@ -132,9 +158,11 @@ def main(argv=None) -> int:
     a, overrides = ap.parse_known_args(argv)
     cfg = _config(a.config, overrides)
     rows = {
-        "PPO, env 1 thread, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 1, 1),
+        "PPO, env 1 thread, torch 1 thread": lambda: ppo_steps_per_s(
+            cfg, a.steps, 1, 1, shares="PPO, env 1 thread, torch 1 thread"
+        ),
         "PPO, env 1 thread, torch 1 thread (2 in updates)": lambda: ppo_steps_per_s(
-            cfg, a.steps, 1, 2
+            cfg, a.steps, 1, 2, shares="PPO, env 1 thread, torch 1 thread (2 in updates)"
         ),
         "PPO, env 2 threads, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 2, 1),
         "two PPO processes side by side, 1 + 1 threads each, in total": lambda: two_ppo_steps_per_s(
@@ -154,7 +182,16 @@ def main(argv=None) -> int:
         f"{cfg.activation}; best of {a.rounds} rounds:"
     )
     for key, rate in best.items():
-        print(f"{key}: {rate:,.0f} env-steps/s")
+        share = SHARES.get(key)
+        extra = (
+            ""
+            if share is None
+            else (
+                f" (of its wall time: the env {share[0]:.0%}, PPO's updates {share[1]:.0%}, the "
+                f"rollout's network passes and the rest {1 - sum(share):.0%}; last round)"
+            )
+        )
+        print(f"{key}: {rate:,.0f} env-steps/s{extra}")
     return 0
 
 

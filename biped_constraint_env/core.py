@@ -126,7 +126,8 @@ class EnvCore:
         self.info_keys = (
             BASE_INFO_KEYS + self.reward_keys + tuple(k for keys, _ in self._extras for k in keys)
         )
-        self._terms = np.zeros((n, len(self.reward_keys)))
+        self._no_terms = np.zeros((n, len(self.reward_keys)))  # a reset's (never written)
+        self._terms = self._no_terms
         self._reasons = np.full(n, None, dtype=object)
         self._ended_by = np.full(n, None, dtype=object)  # the learning termination of a row
         self._any_reason = False
@@ -321,7 +322,7 @@ class EnvCore:
     def clear_period(self) -> None:
         """Forget the last period (after a reset: no events, zero terms, no reasons)."""
         self.sim.n_events[:] = 0
-        self._terms = np.zeros((self.n, len(self.reward_keys)))
+        self._terms = self._no_terms
         self._reasons[:] = None
         self._any_reason = False
         self.perturb.push_ns[:] = 0.0
@@ -351,16 +352,15 @@ class EnvCore:
         sim, one = self.sim, row is not None
         if one:
             mode, side, steps, _ = sim.ist[row].tolist()
-            switches, events = event_infos(_event_rows(sim, row)) if sim.n_events[row] \
+            f = sim.fst[row].tolist()
+            switches, events = event_infos(_event_rows(sim, row)) if sim.n_events.item(row) \
                 else ((), ())  # fmt: skip
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
-                   "t": sim.fst.item(row, FS_T), "hip_y": self.hip.item(row, 0),
-                   "root_y": sim.fst.item(row, FS_ROOT),
+                   "t": f[FS_T], "hip_y": self.hip.item(row, 0), "root_y": f[FS_ROOT],
                    "switches": switches, "events": events,
                    "termination_reason": self._reasons[row],
-                   "motor_work_pos_j": sim.fst.item(row, FS_WORK_POS),
-                   "motor_work_abs_j": sim.fst.item(row, FS_WORK_ABS),
-                   "damping_loss_j": sim.fst.item(row, FS_DAMPED)}  # fmt: skip
+                   "motor_work_pos_j": f[FS_WORK_POS], "motor_work_abs_j": f[FS_WORK_ABS],
+                   "damping_loss_j": f[FS_DAMPED]}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms[row].tolist(), strict=True))
         else:
             switches = np.empty(self.n, dtype=object)

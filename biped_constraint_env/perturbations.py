@@ -198,6 +198,8 @@ class Perturbations:
 
     def start(self, idx, rngs) -> None:
         """New episodes in rows ``idx`` (row ``idx[k]`` drawing from ``rngs[k]``)."""
+        if not self.active:  # the nominal env: nothing to draw or hold
+            return
         s = self.s
         for i, rng in zip(np.asarray(idx), rngs, strict=True):
             if s.randomises_model:
