@@ -424,4 +424,4 @@ def test_a_recipe_is_its_base_plus_its_own_settings(tmp_path):
         with pytest.raises(SystemExit, match=why):
             parse_config(PPOConfig, ["--config", str(tmp_path / "x.toml")], "")
     shipped = parse_config(PPOConfig, ["--config", "training/configs/ppo_gait_50hz.toml"], "")
-    assert shipped.n_envs == 64 and shipped.gamma == 0.98  # base, then its own
+    assert shipped.n_envs == 64 and shipped.action_bias_nm[0] == 12.0  # base, then its own
