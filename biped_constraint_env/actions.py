@@ -366,7 +366,7 @@ class ActionPart:
             buf.tgt[:], buf.rate[:] = self.bases(np.ones(buf.tgt.shape[0], np.int64))
             return []
 
-        def pd_bases(actions, rngs, skip):  # the targets' bases at the clocks and models
+        def pd_bases(actions, rngs, rows):  # the targets' bases at the clocks and models
             buf.tgt[:], buf.rate[:] = self.bases(sim_modes())
             return actions
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from .gait import SWING_MODELS, GaitReward, height_term, kernel
+from .gait import GaitReward, height_term, kernel, speed_term, swing_term
 from .rewards import REWARD_KINDS, RewardTerm
 from .validation import check_mapping, check_real
 
@@ -155,17 +155,6 @@ class Commands:
         return self.v[:, None]
 
 
-def command_speed_term(r, p) -> np.ndarray:
-    """The period's mean hip speed against the command (at zero: standing still)."""
-    return kernel(r, "speed", p.speed - p.command)
-
-
-def command_swing_term(r, p) -> np.ndarray:
-    """Models 1, 2: the swing ankle carried forward at least at the command; models 3, 4: 1."""
-    short = np.minimum(p.swing_vy - p.command, 0.0)
-    return np.where(np.isin(p.modes, SWING_MODELS), kernel(r, "swing", short), 1.0)
-
-
 def command_cadence_term(r, p) -> np.ndarray:
     """The contact clock against targets stretched at slow commands; 1 at a zero command."""
     moving = p.command > 0.0
@@ -183,12 +172,12 @@ def command_steps_term(r, p) -> np.ndarray:
 
 
 REWARD_KINDS["command"] = (
-    RewardTerm("speed", 0.4, 4.0, target=1.1, value=command_speed_term, gated=True,
+    RewardTerm("speed", 0.4, 4.0, target=1.1, value=speed_term, gated=True,
                doc="kernel of (the period's mean hip speed - the command [m/s])^2; the target: "
                    "the speed the cadence targets are made for"),
     RewardTerm("height", 0.2, 50.0, target=2.95, value=height_term, gated=True,
                doc="kernel of (hip height - target [m])^2"),
-    RewardTerm("swing", 0.2, 1.0, value=command_swing_term, gated=True,
+    RewardTerm("swing", 0.2, 1.0, value=swing_term, gated=True,
                doc="models 1, 2: kernel of min(0, swing ankle speed - the command [m/s])^2; "
                    "models 3, 4: the weight"),
     RewardTerm("cadence", 0.2, 50.0, target=(0.6, 0.25, 0.15, 0.1), per_model=True,

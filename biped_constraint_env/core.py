@@ -199,15 +199,18 @@ class EnvCore:
         return range(self.n) if skip is None else np.setdiff1d(np.arange(self.n), skip)
 
     def _before_hooks(self) -> list:
-        """What runs before a period, in order: fn(actions, rngs, skip) -> actions."""
+        """What runs before a period, in order: fn(actions, rngs, rows) -> actions.
+
+        ``rows``: the rows the period steps (all but the skipped ones), found once per period.
+        """
         sim = self.sim
         hooks = self.action_part.hooks(self.buf, lambda: sim.ist[:, ST_MODE])
 
-        def perturb(actions, rngs, skip):  # pushes due now (stepped rows); delayed actions
-            return self.perturb.before_period(actions.astype(np.float64), rngs, self._rows(skip))
+        def perturb(actions, rngs, rows):  # pushes due now (stepped rows); delayed actions
+            return self.perturb.before_period(actions.astype(np.float64), rngs, rows)
 
-        def commands(actions, rngs, skip):  # commands due for resampling
-            self.commands.before_period(sim.fst[:, FS_T], rngs, self._rows(skip))
+        def commands(actions, rngs, rows):  # commands due for resampling
+            self.commands.before_period(sim.fst[:, FS_T], rngs, rows)
             return actions
 
         if self.perturb.active:
@@ -262,8 +265,9 @@ class EnvCore:
     # ------------------------------------------------------------------ the period, in steps
     def _before_period(self, actions: np.ndarray, rngs, skip) -> np.ndarray:
         """The parts' hooks before the period (PD bases, pushes, delays, commands)."""
+        rows = self._rows(skip) if self._before else None
         for hook in self._before:
-            actions = hook(actions, rngs, skip)
+            actions = hook(actions, rngs, rows)
         self.buf.act[:] = actions
         return actions
 

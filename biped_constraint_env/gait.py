@@ -58,9 +58,14 @@ def kernel(reward, name: str, error) -> np.ndarray:
     return np.exp(-reward.kernels[name] * error**2)
 
 
+def reference_speed(r, p: Period, term: str):
+    """The speed a term measures against [m/s]: each row's command, else the term's target."""
+    return r.targets[term] if p.command is None else p.command
+
+
 def speed_term(r, p: Period) -> np.ndarray:
-    """The period's mean hip speed against the speed target."""
-    return kernel(r, "speed", p.speed - r.targets["speed"])
+    """The period's mean hip speed against the command or target (zero: standing still)."""
+    return kernel(r, "speed", p.speed - reference_speed(r, p, "speed"))
 
 
 def height_term(r, p: Period) -> np.ndarray:
@@ -69,8 +74,8 @@ def height_term(r, p: Period) -> np.ndarray:
 
 
 def swing_term(r, p: Period) -> np.ndarray:
-    """Models 1, 2: the swing ankle carried forward at least at the target; models 3, 4: 1."""
-    short = np.minimum(p.swing_vy - r.targets["swing"], 0.0)
+    """Models 1, 2: the swing ankle moving forward at the command or target; models 3, 4: 1."""
+    short = np.minimum(p.swing_vy - reference_speed(r, p, "swing"), 0.0)
     return np.where(np.isin(p.modes, SWING_MODELS), kernel(r, "swing", short), 1.0)
 
 

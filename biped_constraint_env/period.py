@@ -54,9 +54,6 @@ from .state import (
 )
 from .stepper import nb_make_scratch
 
-N_REWARD_OUT = N_RECORD
-"""Columns of the per-period record (:data:`~.rewards.N_RECORD`)."""
-
 
 @njit(cache=True)
 def _period_range(robot, state, numerics, io, cfgs, lo, hi):
@@ -286,7 +283,7 @@ class EnvBuffers:
         self.pcfg = np.array(pcfg, dtype=np.float64)
         self.obs = np.zeros((n, OBS_DIM))
         self.hip = np.zeros((n, 4))
-        self.rew = np.zeros((n, N_REWARD_OUT))
+        self.rew = np.zeros((n, N_RECORD))
         self.fell = np.zeros(n, np.int64)
         chs, scs = params.packed
         self.chs = np.repeat(chs[None], n, axis=0)  # each row's robot (set_params changes one)

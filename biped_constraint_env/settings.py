@@ -119,11 +119,6 @@ class EnvSettings:
         return self.termination.fall_hip_height_m
 
     @property
-    def max_model_time_s(self) -> float | None:
-        """A contact phase's longest time [s] (None: off)."""
-        return self.termination.get("max_model_time_s")
-
-    @property
     def time_limit_s(self) -> float | None:
         """The episode's time limit [s] of simulated time (None: none)."""
         return self.termination.time_limit_s
