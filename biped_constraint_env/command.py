@@ -14,14 +14,18 @@ The reward (``reward="command"``) has no recorded motion: the terms of the gait 
 stops at a zero command:
 
 * ``speed``: weight * exp(-kernel * (hip progress / dt - command)^2) (kernel 4: the field's
-  exp(-e^2 / 0.25); at a zero command it pays for standing still);
+  exp(-e^2 / 0.25)); at a zero command it pays for standing still in model 4 (both feet down:
+  weight * exp(-kernel * speed^2)) and half the weight in models 1-3, so that a walk stops by
+  finishing its step into double support (:func:`command_speed_term`);
 * ``height``: weight * exp(-kernel * (hip height - target)^2);
 * ``swing``: models 1, 2: weight * exp(-kernel * min(0, swing ankle speed - command)^2), the
   swing foot carried forward at least at the command; models 3, 4: the weight;
 * ``cadence``: weight * exp(-kernel * max(0, time in the model - target * stretch)^2), the
   targets (per model) stretched at slow commands by ``min(3, speed target / command)``; at a
   zero command the full weight (any contact state may be held: standing);
-* ``step``: weight * min(1, command / speed target) per completed step (none at zero).
+* ``step``: weight * min(1, command / speed target) per completed step (none at zero);
+* ``effort``: weight * exp(-kernel * sum((tau / 150 N m)^2)), the torques' size (an energy
+  term; weight 0 by default: off).
 
 ``gated`` multiplies the speed, height and swing terms by the cadence kernel, as the gait reward.
 Every term is positive; a period ended by an event earns only its steps.
@@ -34,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from .actions import TORQUE_LIMIT_NM
 from .gait import GaitReward, height_term, kernel, speed_term, swing_term
 from .rewards import REWARD_KINDS, RewardTerm
 from .validation import check_mapping, check_real
@@ -166,15 +171,41 @@ def command_cadence_term(r, p) -> np.ndarray:
     return np.where(moving, kernel(r, "cadence", over), 1.0)
 
 
+STAND_MODEL = 4
+"""The contact state a zero command pays for holding still in: both feet down (model 4)."""
+STEP_TO_STAND = 0.5
+"""What the speed term pays at a zero command in models 1-3 (a fraction of its weight): the
+step under way may finish into model 4, where standing still pays up to the whole weight."""
+
+
+def command_speed_term(r, p) -> np.ndarray:
+    """The hip speed against the command; at a zero command, standing still in model 4.
+
+    At a zero command, model 4 (both feet down) pays the kernel of the hip speed (standing
+    still: the whole weight) and models 1-3 :data:`STEP_TO_STAND`: a walk stops by finishing
+    its step into double support, not by braking on one foot (which tips the flat foot back
+    or puts the raised heel down, both out of the four models).
+    """
+    moving = p.command != 0.0
+    still = np.where(p.modes == STAND_MODEL, kernel(r, "speed", p.speed), STEP_TO_STAND)
+    return np.where(moving, speed_term(r, p), still)
+
+
+def command_effort_term(r, p) -> np.ndarray:
+    """The torques' size: the kernel of sum((tau / the default torque limit)^2)."""
+    return kernel(r, "effort", np.sqrt(p.tau_sq) / TORQUE_LIMIT_NM)
+
+
 def command_steps_term(r, p) -> np.ndarray:
     """The steps completed, each paid min(1, command / speed target) (none at zero)."""
     return np.clip(p.command / r.targets["speed"], 0.0, 1.0) * p.steps
 
 
 REWARD_KINDS["command"] = (
-    RewardTerm("speed", 0.4, 4.0, target=1.1, value=speed_term, gated=True,
-               doc="kernel of (the period's mean hip speed - the command [m/s])^2; the target: "
-                   "the speed the cadence targets are made for"),
+    RewardTerm("speed", 0.4, 4.0, target=1.1, value=command_speed_term, gated=True,
+               doc="kernel of (the period's mean hip speed - the command [m/s])^2; at a zero "
+                   "command the kernel of the hip speed in model 4 and 0.5 in models 1-3; the "
+                   "target: the speed the cadence targets are made for"),
     RewardTerm("height", 0.2, 50.0, target=2.95, value=height_term, gated=True,
                doc="kernel of (hip height - target [m])^2"),
     RewardTerm("swing", 0.2, 1.0, value=swing_term, gated=True,
@@ -186,6 +217,8 @@ REWARD_KINDS["command"] = (
                    "slow commands; the weight at a zero command"),
     RewardTerm("step", 10.0, value=command_steps_term, per_period=False,
                doc="weight x min(1, command / speed target) per step"),
+    RewardTerm("effort", 0.0, 2.0, value=command_effort_term,
+               doc="kernel of sum((tau / 150 N m)^2), the torques' size (weight 0: off)"),
 )  # fmt: skip
 COMMAND_TERMS = tuple(t.name for t in REWARD_KINDS["command"])
 """The command reward's terms, in order."""

@@ -289,7 +289,11 @@ class ConstrainedBipedEnv(gym.Env):
       ``fall_hip_height_m``, ``max_model_time_s`` and ``time_limit_s`` the ``termination``
       dict; ``phase_obs=True`` is ``observation=["phase"]``; the "env" reward's weights
       (``forward_reward_weight``...) are ``reward={"weights": {...}}``. Each old keyword is
-      refused naming its new place.
+      refused naming its new place. Changed: the command reward's speed term at a zero
+      command pays for standing still in model 4 (both feet down) and half its weight in
+      models 1-3 (it was the hip-speed kernel in every model); ``max_model_time_s`` counts a
+      contact phase's periods under a speed command only (a restart from standing has the
+      whole limit). Added: the command reward's ``effort`` term (weight 0: off).
 
     Example:
         >>> import gymnasium as gym

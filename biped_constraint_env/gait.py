@@ -41,7 +41,8 @@ class Period:
     ``speed``: the hip's mean forward speed [m/s] (progress / dt); ``hip_z`` [m]; ``swing_vy``:
     the swing ankle's forward speed [m/s]; ``modes``: the models after it; ``model_time_s``: the
     time since the current model began [s]; ``steps``: steps completed in it; ``command``: the
-    commanded speeds [m/s] it ran under (None: the gait reward's constant target).
+    commanded speeds [m/s] it ran under (None: the gait reward's constant target);
+    ``tau_sq``: sum(tau^2) of the period's torques [N^2 m^2] (its time mean where they vary).
     """
 
     speed: np.ndarray
@@ -51,6 +52,7 @@ class Period:
     model_time_s: np.ndarray
     steps: np.ndarray
     command: np.ndarray | None = None
+    tau_sq: np.ndarray | None = None
 
 
 def kernel(reward, name: str, error) -> np.ndarray:
@@ -133,14 +135,16 @@ class GaitReward:
         self._gated = reward.gated
         self._live = [c for c, t in enumerate(self.specs) if t.per_period]
 
-    def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive, command=None):
+    def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive, command=None,
+              tau_sq=None):  # fmt: skip
         """(n, k + 1): the terms (the kind's order) and their sum, after a period.
 
         ``progress_m``: the hip's forward progress in the period [m]; ``alive``: periods not
         ended by an event (the others earn only the terms not ``per_period``: the steps); the
         rest as :class:`Period`'s.
         """
-        p = Period(progress_m / self.dt, hip_z, swing_vy, modes, model_time_s, steps, command)
+        p = Period(progress_m / self.dt, hip_z, swing_vy, modes, model_time_s, steps, command,
+                   tau_sq)  # fmt: skip
         out = np.empty((len(progress_m), len(self.specs) + 1))
         gate = None
         for c, t in enumerate(self.specs):

@@ -311,7 +311,8 @@ class GaitRewardPart:
         rec, sim = core.buf.rew, core.sim
         out = core.gait.terms(rec[:, REC_PROGRESS], core.hip[:, 1], rec[:, REC_SWING_VY],
                               sim.ist[:, ST_MODE], core.clock.model_time_s(),
-                              rec[:, REC_STEPS], ~terminated)  # fmt: skip
+                              rec[:, REC_STEPS], ~terminated,
+                              tau_sq=rec[:, REC_TAU_SQ])  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1].copy()
@@ -330,7 +331,8 @@ class CommandRewardPart:
         out = core.command_reward.terms(rec[:, REC_PROGRESS], core.hip[:, 1],
                                         rec[:, REC_SWING_VY], sim.ist[:, ST_MODE],
                                         core.clock.model_time_s(), rec[:, REC_STEPS],
-                                        ~terminated, command)  # fmt: skip
+                                        ~terminated, command,
+                                        tau_sq=rec[:, REC_TAU_SQ])  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1].copy()

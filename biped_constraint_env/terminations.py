@@ -24,8 +24,9 @@ from .validation import check_mapping, check_real
 class ModelTime:
     """``termination={"max_model_time_s": T}``: a contact phase held longer than T [s].
 
-    By the contact clock; with a command, only while it is not zero (standing holds a contact
-    phase). Reason ``model_time``.
+    By the contact clock; with a command, only the periods of the phase run under a speed
+    command count (standing holds a contact phase, and a restart from it has T from the new
+    command on). Reason ``model_time``.
     """
 
     reason = "model_time"
@@ -33,15 +34,23 @@ class ModelTime:
     def __init__(self, core, limit_s: float):
         """For ``core``'s clock and commands (if any), and the limit [s]."""
         self.clock, self.commands, self.limit_s = core.clock, core.commands, limit_s
+        self.held = np.zeros(core.n, np.int64)  # periods of the phase under a speed command
 
     def __call__(self, skip) -> np.ndarray:
         """(n,) the stepped rows that held their contact phase too long."""
-        held = self.clock.model_time_s() > self.limit_s + 1e-9
-        if self.commands is not None:
-            held &= self.commands.v != 0.0
+        j = self.clock.j  # periods since the phase began: 0 after a switch or a start
+        held = j if self.commands is None else np.where(
+            self.commands.v != 0.0, np.minimum(self.held + 1, j), 0)  # fmt: skip
+        if skip is None:
+            self.held = held.copy()
+        else:
+            stepped = np.ones(held.shape[0], bool)
+            stepped[skip] = False
+            self.held[stepped] = held[stepped]
+        over = self.held * self.clock.dt > self.limit_s + 1e-9
         if skip is not None:
-            held[skip] = False
-        return held
+            over[skip] = False
+        return over
 
 
 def check_model_time(value) -> float:

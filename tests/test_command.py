@@ -73,20 +73,33 @@ def test_a_user_sets_the_command_as_a_joystick_and_it_holds():
 def test_command_reward_follows_the_command_and_pays_standing_at_zero():
     s = make_settings(task="command")
     r = CommandReward(s.reward, s.dt, 2)
-    args = dict(hip_z=np.full(2, 2.95), swing_vy=np.ones(2), modes=np.array([1, 1]),
+    args = dict(hip_z=np.full(2, 2.95), swing_vy=np.ones(2), modes=np.array([4, 4]),
                 model_time_s=np.array([5.0, 5.0]), steps=np.zeros(2),
-                alive=np.ones(2, bool))  # fmt: skip
-    # hip still, a contact phase held 5 s: at a zero command all but the steps pay in full
+                alive=np.ones(2, bool), tau_sq=np.zeros(2))  # fmt: skip
+    # hip still in model 4, a contact phase held 5 s: at a zero command all but the steps pay
+    # in full
     out = r.terms(np.zeros(2), command=np.array([0.0, 1.0]), **args)
     assert out[0, :4].tolist() == pytest.approx([0.4, 0.2, 0.2, 0.2])
     assert out[1, 0] == 0.0 and out[1, 3] == pytest.approx(0.0, abs=1e-12)  # gated off
+    # at a zero command: drifting in model 4 pays less; models 1-3 half the speed weight
+    out = r.terms(np.array([0.5, 0.0]) * s.dt, command=np.zeros(2), **args)
+    assert out[0, 0] == pytest.approx(0.4 * np.exp(-4 * 0.25)) and out[1, 0] == pytest.approx(0.4)
+    for m in (1, 2, 3):
+        out = r.terms(np.zeros(2), command=np.zeros(2), **dict(args, modes=np.array([m, m])))
+        assert out[:, 0].tolist() == pytest.approx([0.2, 0.2])
     # walking at the command pays the speed term in full, another speed less
     moving = dict(args, model_time_s=np.array([0.1, 0.1]))
     out = r.terms(np.array([1.0, 0.6]) * s.dt, command=np.array([1.0, 1.0]), **moving)
     assert out[0, 0] == pytest.approx(0.4) and out[1, 0] == pytest.approx(0.4 * np.exp(-4 * 0.16))
     out = r.terms(np.zeros(2), command=np.array([0.0, 2.0]), **dict(moving, steps=np.ones(2)))
     assert out[:, 4].tolist() == [0.0, 10.0]  # steps pay nothing at a zero command
-    assert np.allclose(out[:, 5], out[:, :5].sum(axis=1))
+    assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
+    assert not out[:, 5].any()  # the effort term is off by default
+    on = CommandReward(make_settings(task="command", reward={"kind": "command",
+                                                             "weights": {"effort": 0.2}}).reward,
+                       s.dt, 2)  # fmt: skip
+    out = on.terms(np.zeros(2), command=np.ones(2), **dict(args, tau_sq=np.array([0.0, 75.0**2])))
+    assert out[:, 5].tolist() == pytest.approx([0.2, 0.2 * np.exp(-2.0 * 0.25)])
 
 
 def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
@@ -104,7 +117,25 @@ def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
     assert ended == {0.0: None, 1.0: "model_time"}
 
 
-def test_protocol_measures_stride_speed_and_sets_commands_between_periods():
+def test_a_restart_from_standing_gets_the_whole_limit_from_the_new_command():
+    kw = {**KW, "termination": {"max_model_time_s": 0.1}}
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    env.reset(seed=0, options={"command": 0.0, "q": REST})
+    for _ in range(10):  # 0.2 s standing in model 1 at a zero command: past the limit
+        *_, term, _, info = env.step(np.zeros(5))
+        assert not term and info["mode"] == 1
+    env.unwrapped.set_command(1.0)
+    reasons = []
+    for _ in range(8):
+        *_, term, _, info = env.step(np.zeros(5))
+        reasons.append(info["termination_reason"])
+        if term:
+            break
+    # the limit counts from the command: 5 periods (0.1 s) pass, the 6th ends the episode
+    assert reasons == [None] * 5 + ["model_time"], reasons
+
+
+def test_protocol_measures_stride_speed_and_sets_commands_between_periods(monkeypatch):
     from training.evaluation import command_protocol as cp
 
     # a synthetic walk at 1.2 m/s with a step every 0.4 s: stride speed error 0.2 at 1.0 m/s
@@ -123,3 +154,21 @@ def test_protocol_measures_stride_speed_and_sets_commands_between_periods():
     assert seen[0].tolist() == [0.5, 0.5] and all(e["command"][0] == 0.5 for e in eps)
     assert any(s.tolist() == [1.5, 1.5] for s in seen)  # changed when the time came
     assert all(len(e["t"]) == len(e["hip_y"]) for e in eps)
+    # the robustness rows at 1.0 m/s: each condition's perturbation reaches the env
+    kw = []
+    walked = [{"steps_completed": 20, "end": "time_limit"}]
+    monkeypatch.setattr(cp, "run_commanded", lambda a, k, *_: kw.append(k) or walked)
+    rows = cp.model_rows(act, {"task": "command"}, [0], "ConstrainedBiped-v0")
+    rows += cp.slope_rows(act, {"task": "command"}, [0], "ConstrainedBiped-v0")
+    assert [k["perturbations"] for k in kw[:3]] == [
+        {"mass_scale": (0.9, 1.1)},
+        {"friction_ratio": (0.4, 0.6)},
+        {"obs_noise": (0.005, 0.05)},
+    ]
+    assert kw[3]["perturbations"] == {"slope_rad": pytest.approx(np.radians(-5.0))}
+    assert [r["row"] for r in rows[:3]] == [
+        "link masses ±10%, 1.0 m/s",
+        "K 0.4-0.6, 1.0 m/s",
+        "sensor noise 0.005 rad, 0.05 rad/s, 1.0 m/s",
+    ]
+    assert all(r["success"]["rate"] == 1.0 for r in rows)

@@ -185,9 +185,14 @@ def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
 
 def test_committed_command_policy_follows_a_command_from_rest_with_no_recorded_motion():
     """policies/ppo_command_50hz: the network alone sets torques every 20 ms with the command in
-    its input, trained by PPO from a random network on the command task (no recorded motion in
-    its reward, starts or input). One held-out 30 s episode from rest at 1.0 m/s walks, near
-    the command."""
+    its input, trained by PPO in three stages from a random network on the command task (no
+    recorded motion in its reward, starts or input; each later stage starts from the one
+    before's published snapshot, recorded by its weights' hash, and trains with pushes, slopes
+    and randomised models). One held-out 30 s episode from rest at 1.0 m/s walks, near the
+    command."""
+    import hashlib
+    import json
+
     import torch
 
     from biped_constraint_env.settings import make_settings
@@ -195,14 +200,24 @@ def test_committed_command_policy_follows_a_command_from_rest_with_no_recorded_m
     from training.ppo.policy_io import available, load_policy, policy_batch_actor
 
     torch.set_num_threads(1)
+    stages = [POLICY.parent / f"ppo_command_stage{k}_50hz" for k in (1, 2)]
     path = POLICY.parent / "ppo_command_50hz"
     policy, norm, cfg, _ = load_policy(path)
-    assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
-    run, train = cfg.settings(), make_settings(**cfg.train_env_kwargs())
-    for s in (run, train):
+    cfgs = [load_policy(p)[2] for p in stages] + [cfg]
+    assert [c.init_from for c in cfgs] == [""] + [f"policies/{p.name}" for p in stages]
+    for before, p in zip(stages, (stages[1], path), strict=True):
+        record = json.loads((p / "init_from.json").read_text())
+        weights = before / record["snapshot"] / "policy.safetensors"
+        assert hashlib.sha256(weights.read_bytes()).hexdigest() == record["policy_sha256"]
+    for c, p in zip(cfgs, (*stages, path), strict=True):
+        assert c.teacher == "" and c.base_controller == "" and not available(p, "imitation")
+        s = make_settings(**c.train_env_kwargs())
         assert s.task == "command" and s.reward.kind == "command" and not s.needs_reference
         assert s.action.kind == "torque" and s.command is not None and s.physics.options.strict
-    assert run.start.start == "rest"
+    train = make_settings(**cfg.train_env_kwargs())
+    assert train.perturbations.push_impulse_ns and train.perturbations.slope_rad
+    run = cfg.settings()
+    assert run.start.start == "rest" and not run.perturbations.active
     (ep,) = run_commanded(policy_batch_actor(policy, norm, cfg), cfg.env_kwargs(), [500000],
                           lambda t, k: np.full(len(t), 1.0), 30.0)  # fmt: skip
     assert ep["end"] == "time_limit" and ep["steps_completed"] >= 20, ep["end"]

@@ -76,3 +76,40 @@ def test_work_is_the_same_in_the_batched_env_and_restarts_with_each_episode():
             break
     single.reset(seed=5)
     assert single.unwrapped.core.info(0)["motor_work_abs_j"] == 0.0
+
+
+def test_the_energy_figure_reads_command_rows_and_walkers_and_refuses_an_old_evaluation(tmp_path):
+    import json
+
+    from training.evaluation import energy_figure
+
+    cmd = {"results": [{}], "command_protocol": [
+        {"row": "start"},
+        {"row": "track 0.3 m/s", "command_m_s": 0.3, "cost_of_transport_mean": 2.5,
+         "damping_share_mean": 0.9},
+        {"row": "track 1.0 m/s", "command_m_s": 1.0, "cost_of_transport_mean": 1.5,
+         "damping_share_mean": 0.8}]}  # fmt: skip
+    walker = {
+        "results": [
+            {
+                "speed_mean_m_s": 1.2,
+                "cost_of_transport_mean": 2.0,
+                "cost_of_transport_abs_mean": 2.4,
+                "damping_share_mean": 0.7,
+            }
+        ]
+    }
+    old = {"results": [{"speed_mean_m_s": 1.2, "cost_of_transport_mean": 2.0}]}
+    for name, d in (("cmd", cmd), ("walker", walker), ("old", old)):
+        (tmp_path / f"{name}.json").write_text(json.dumps(d))
+    assert [p["speed_m_s"] for p in energy_figure.points(tmp_path / "cmd.json")] == [0.3, 1.0]
+    (w,) = energy_figure.points(tmp_path / "walker.json")
+    assert (w["speed_m_s"], w["cot"], w["damping_share"]) == (1.2, 2.0, 0.7)
+    with pytest.raises(SystemExit, match="evaluate the policy again"):
+        energy_figure.points(tmp_path / "old.json")
+    out = tmp_path / "out"
+    args = ["--evaluations", str(tmp_path / "cmd.json"), str(tmp_path / "walker.json"),
+            "--labels", "command", "walker", "--out", str(out)]  # fmt: skip
+    assert energy_figure.main(args) == 0
+    assert (out / "energy.png").is_file() and "| walker | 1.20 | 2.00 | 70% |" in (
+        out / "energy.md").read_text()  # fmt: skip

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -174,6 +175,34 @@ def test_train_ppo_and_evaluate_smoke(tmp_path):
     assert policy["success"]["episodes"] == 2 and "ci95" in policy["success"]
     assert (out / "figures" / "best.gif").is_file()
     assert not (run / "evaluation.json").exists()  # the run directory is only read
+
+
+def test_a_second_stage_starts_from_a_policys_published_snapshot(tmp_path):
+    import torch
+
+    from training.ppo import train as train_ppo
+    from training.ppo.policy_io import load_policy, published_snapshot
+
+    src = Path(__file__).resolve().parents[1] / "policies" / "ppo_command_stage1_50hz"
+    flags = ["--config", str(src / "config.toml"), "--total-timesteps", "64", "--n-envs", "2",
+             "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1", "--eval-freq", "1000",
+             "--checkpoint-freq", "64", "--progress", "false",
+             "--learning-rate", "1e-12"]  # fmt: skip
+    rc = train_ppo.main([*flags, "--out-dir", str(tmp_path), "--init-from", str(src)])
+    assert rc == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    record = json.loads((run / "init_from.json").read_text())
+    assert record["snapshot"] == published_snapshot(src)[0] and len(record["policy_sha256"]) == 64
+    new, *_ = load_policy(run, "final")
+    old, *_ = load_policy(src)
+    for (k, a), b in zip(new.state_dict().items(), old.state_dict().values(), strict=True):
+        if k == "log_std":  # a new run's initial exploration noise is its config's
+            assert a.tolist() == pytest.approx([-5.0, -4.0, -4.0, -3.5, -3.0])
+        else:  # a vanishing learning rate: the start's weights
+            assert torch.allclose(a, b, atol=1e-6), k
+    bad = tmp_path / "none"
+    with pytest.raises(SystemExit, match="no such policy directory"):
+        train_ppo.main([*flags, "--out-dir", str(tmp_path / "b"), "--init-from", str(bad)])
 
 
 def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, monkeypatch):
@@ -425,3 +454,26 @@ def test_a_recipe_is_its_base_plus_its_own_settings(tmp_path):
             parse_config(PPOConfig, ["--config", str(tmp_path / "x.toml")], "")
     shipped = parse_config(PPOConfig, ["--config", "training/configs/ppo_gait_50hz.toml"], "")
     assert shipped.n_envs == 64 and shipped.action_bias_nm[0] == 12.0  # base, then its own
+
+
+def test_a_discount_ramp_sets_gamma_where_sb3_reads_it_before_each_rollout():
+    from types import SimpleNamespace as NS
+
+    from training.ppo.callbacks import gamma_schedule
+    from training.ppo.config import PPOConfig
+
+    cfg = PPOConfig(gamma=0.9606, gamma_final=0.98, gamma_ramp=(2_000_000, 4_000_000))
+    cfg.validate()
+    assert [cfg.gamma_at(n) for n in (0, 2_000_000, 4_000_000, 9_000_000)] == [
+        0.9606, 0.9606, 0.98, 0.98]  # fmt: skip
+    vecnorm = NS(gamma=0.0)
+    model = NS(num_timesteps=3_000_000, gamma=0.0, rollout_buffer=NS(gamma=0.0),
+               logger=NS(record=lambda *a: None), get_env=lambda: None)  # fmt: skip
+    cb = gamma_schedule(cfg, vecnorm)
+    cb.init_callback(model)
+    cb.on_rollout_start()
+    assert model.gamma == model.rollout_buffer.gamma == vecnorm.gamma == pytest.approx(0.9703)
+    for bad in ({"gamma_final": 0.98}, {"gamma_ramp": (1, 2)},
+                {"gamma_final": 0.98, "gamma_ramp": (5, 2)}):  # fmt: skip
+        with pytest.raises(ValueError, match="go together"):
+            PPOConfig(**bad).validate()

@@ -18,8 +18,10 @@ command a function of its time), on the report seeds, with the default strict ph
   termination;
 * with ``--robustness``, **pushes** (an OSU-style table: hip Δv of ``PUSH_DV_M_S`` forward and
   backward, each episode at its own phase of the gait, shown in ``PUSH_PHASES`` bins,
-  commanded 1.0 m/s: a success is no termination in the 10 s after the push) and
-  **slopes** (``SLOPES_DEG`` at 1.0 m/s: the walking success).
+  commanded 1.0 m/s: a success is no termination in the 10 s after the push),
+  **slopes** (``SLOPES_DEG`` at 1.0 m/s: the walking success) and the **model's
+  randomisation** and **sensor noise** (``MODEL_CONDITIONS`` at 1.0 m/s, each alone: the
+  walking success).
 """
 
 from __future__ import annotations
@@ -284,18 +286,36 @@ def push_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     return rows
 
 
-def slope_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
-    """Slopes at 1.0 m/s: the walking success on each."""
+MODEL_CONDITIONS = (
+    ("link masses ±10%", {"mass_scale": (0.9, 1.1)}),
+    ("K 0.4-0.6", {"friction_ratio": (0.4, 0.6)}),
+    ("sensor noise 0.005 rad, 0.05 rad/s", {"obs_noise": (0.005, 0.05)}),
+)
+"""The model's randomisation and the sensor noise of the robustness protocol, each alone."""
+
+
+def _walk_rows(act, env_kwargs, seeds, env_id, conditions) -> list[dict]:
+    """The walking success at 1.0 m/s under each (label, perturbations) of ``conditions``."""
     rows = []
-    for deg in SLOPES_DEG:
-        kw = {**env_kwargs, "perturbations": {**(env_kwargs.get("perturbations") or {}),
-                                              "slope_rad": math.radians(deg)}}  # fmt: skip
+    for label, pert in conditions:
+        kw = {**env_kwargs, "perturbations": {**(env_kwargs.get("perturbations") or {}), **pert}}
         eps = run_commanded(act, kw, seeds, lambda t, k: np.full(len(t), START_COMMAND_M_S),
                             30.0, env_id)  # fmt: skip
-        rows.append({"row": f"slope {deg:+.1f} deg, 1.0 m/s",
+        rows.append({"row": f"{label}, 1.0 m/s",
                      "success": success([e["steps_completed"] for e in eps]),
                      "ends": _ends(eps)})  # fmt: skip
     return rows
+
+
+def slope_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
+    """Slopes at 1.0 m/s: the walking success on each."""
+    slopes = [(f"slope {deg:+.1f} deg", {"slope_rad": math.radians(deg)}) for deg in SLOPES_DEG]
+    return _walk_rows(act, env_kwargs, seeds, env_id, slopes)
+
+
+def model_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
+    """Masses, K and sensor noise (:data:`MODEL_CONDITIONS`) at 1.0 m/s: the walking success."""
+    return _walk_rows(act, env_kwargs, seeds, env_id, MODEL_CONDITIONS)
 
 
 def push_figure(rows: list[dict], path) -> None:

@@ -391,11 +391,12 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
         print("the command task's protocol: start, tracking, stop and restart, sequences",
               flush=True)  # fmt: skip
         protocol = command_protocol.run_protocol(batch, cfg.env_kwargs(), seeds, cfg.env_id)
-        if args.robustness:  # the push table (size x direction x phase) and slopes
+        if args.robustness:  # the push table (size x direction x phase), slopes, the model
             pushes = command_protocol.push_rows(batch, cfg.env_kwargs(), seeds, cfg.env_id)
             command_protocol.push_figure(pushes, out_dir / "figures" / "pushes.png")
-            protocol += pushes + command_protocol.slope_rows(batch, cfg.env_kwargs(), seeds,
-                                                             cfg.env_id)  # fmt: skip
+            protocol += pushes
+            for rows in (command_protocol.slope_rows, command_protocol.model_rows):
+                protocol += rows(batch, cfg.env_kwargs(), seeds, cfg.env_id)
         print("\n" + command_protocol.markdown(protocol), flush=True)
     print(TABLE_HEADER, flush=True)
     main_row = batched_row(label, batch, cfg.env_kwargs(), seeds, cfg.env_id, start == "rest")

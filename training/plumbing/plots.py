@@ -162,7 +162,8 @@ def learning_curve(run: Path, path: Path) -> None:
     axes[0].set_title("PPO from the imitation result" if imitation.exists() else "PPO", fontsize=9)
     for ax in axes:
         ax.set_xlabel("env steps (PPO)")
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:  # nothing to label before an episode ends
+            ax.legend(fontsize=8)
         ax.grid(lw=0.3)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)

@@ -69,6 +69,26 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
     return CriticWarmup()
 
 
+def gamma_schedule(cfg: PPOConfig, vecnorm):
+    """A callback: before every rollout the discount :meth:`PPOConfig.gamma_at` gives.
+
+    Set where SB3 reads it: the algorithm (bootstrapping at truncation), its rollout buffer
+    (GAE) and the reward normaliser's running return.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class GammaSchedule(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_start(self) -> None:
+            g = cfg.gamma_at(self.model.num_timesteps)
+            self.model.gamma = self.model.rollout_buffer.gamma = vecnorm.gamma = g
+            self.logger.record("train/gamma", g)
+
+    return GammaSchedule()
+
+
 def progress_bar(cfg: PPOConfig):
     """A bar over the run's whole total: a resumed run starts where it stopped, ETA included."""
     from stable_baselines3.common.callbacks import BaseCallback

@@ -48,6 +48,9 @@ class PPOConfig:
     lr_schedule: str = "constant"  # "constant" or "linear" (decays to 0 at total_timesteps)
     target_kl: float = 0.0  # > 0: stop an update's epochs when the KL exceeds 1.5 x this
     gamma: float = 0.99  # discount factor
+    gamma_final: float = 0.0  # > 0: the discount ramps linearly from gamma to this over the
+    # env steps gamma_ramp gives (a short horizon while the start is learned, then a long one)
+    gamma_ramp: tuple[int, ...] = ()  # (from, to): the env steps of that ramp
     gae_lambda: float = 0.95  # GAE lambda
     clip_range: float = 0.2  # PPO clipping
     ent_coef: float = 0.0  # entropy bonus
@@ -100,6 +103,9 @@ class PPOConfig:
     bc_anchor_lr: float = 1e-4  # learning rate of those steps
     out_dir: Path = Path("runs")  # where the run directory is created
     resume: str = ""  # a run directory to continue (to its own saved total)
+    init_from: str = ""  # a policy directory whose published snapshot (weights, normaliser)
+    # starts this new run: a second stage of training; the network must match; the initial
+    # exploration noise is still this config's (log_std_joints, action_std_nm) where it sets one
     progress: bool = True  # progress bars
 
     def validate(self) -> None:
@@ -119,10 +125,14 @@ class PPOConfig:
             ("gear", (1, 5)),
             ("log_std_joints", (0, 5)),
             ("action_bias_nm", (0, 5)),
+            ("gamma_ramp", (0, 2)),
             ("net_arch", tuple(range(1, 9))),
         ):
             if len(getattr(self, name)) not in sizes:
                 raise ValueError(f"--{_flag(name)} takes {' or '.join(map(str, sizes))} values")
+        if (self.gamma_final > 0) != (len(self.gamma_ramp) == 2) or self.gamma_ramp[:1] > \
+                self.gamma_ramp[1:]:  # fmt: skip
+            raise ValueError("--gamma-final and --gamma-ramp FROM TO (FROM <= TO) go together")
         if self.batch_size > self.n_steps * self.n_envs:
             raise ValueError("--batch-size must be at most --n-steps x --n-envs")  # fmt: skip
         from biped_constraint_env.reference import OWN_REFERENCE, REFERENCES
@@ -172,6 +182,14 @@ class PPOConfig:
                 )
         if self.resume:
             raise ValueError(f"resume must be empty in a saved config, got {self.resume!r}")
+
+    def gamma_at(self, env_steps: int) -> float:
+        """The discount at ``env_steps`` (:attr:`gamma`, ramped to :attr:`gamma_final`)."""
+        if self.gamma_final <= 0:
+            return self.gamma
+        a, b = self.gamma_ramp
+        f = 1.0 if env_steps >= b else 0.0 if env_steps <= a else (env_steps - a) / (b - a)
+        return self.gamma + f * (self.gamma_final - self.gamma)
 
     def env_kwargs(self) -> dict:
         """Keyword arguments of the env the policy runs in: ``[env]``, with its own starts.
@@ -260,7 +278,8 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("seed", 0, 2**31 - 1), ("total_timesteps", 0, _BIG), ("n_envs", 1, 4096),
     ("env_threads", 1, 256), ("n_steps", 1, 1 << 20), ("batch_size", 1, 1 << 24),
     ("n_epochs", 1, 1000), ("learning_rate", 0.0, 1.0), ("target_kl", 0.0, 10.0),
-    ("gamma", 0.0, 1.0), ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, 10.0),
+    ("gamma", 0.0, 1.0), ("gamma_final", 0.0, 1.0), ("gamma_ramp", 0, _BIG),
+    ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, 10.0),
     ("ent_coef", -1.0, 10.0), ("log_std_init", -20.0, 5.0), ("sde_sample_freq", -1, _BIG),
     ("net_arch", 1, 4096), ("torch_threads", 1, 256), ("update_threads", 0, 256),
     ("eval_freq", 1, _BIG), ("eval_episodes", 1, 100_000), ("checkpoint_freq", 1, _BIG),

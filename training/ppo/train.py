@@ -24,6 +24,7 @@ interrupted, imitation or PPO, to the run's own ``total_timesteps`` (give
 
 from __future__ import annotations
 
+import hashlib
 import os
 import time
 from collections.abc import Sequence
@@ -43,6 +44,7 @@ from training.plumbing.safe_files import read_npz
 from training.ppo.build import make_model, training_env
 from training.ppo.callbacks import (
     critic_warmup,
+    gamma_schedule,
     make_callbacks,
     progress_bar,
     stop_reason,
@@ -55,14 +57,18 @@ from training.ppo.config import (
     bc_weights,
 )
 from training.ppo.policy_io import (
+    POLICY_FILE,
     STATE_FILE,
     UntrustedFileError,
     available,
+    check_weights,
     is_complete,
+    json_text,
     load_optimizer,
     load_state,
     load_weights,
     open_snapshot,
+    published_snapshot,
     restore_normalizer,
     save_snapshot,
 )
@@ -165,6 +171,30 @@ def _main(cfg: PPOConfig, run: OutDir, extend: bool = False) -> int:
         vecnorm.venv.close()
 
 
+def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
+    """A new run's model from ``cfg.init_from``'s published snapshot (a second stage).
+
+    Its weights and its normaliser, checked as any untrusted snapshot (the config's initial
+    exploration noise, where it sets one, then replaces the snapshot's action std); the run
+    records where it started (``init_from.json``: the policy, its snapshot and the weights'
+    SHA-256).
+    """
+    src = Path(cfg.init_from)
+    if not src.is_dir():
+        raise Refusal(f"train_ppo: error: --init-from: {src}: no such policy directory")
+    which, _ = published_snapshot(src)
+    snap = open_snapshot(src, which)
+    check_weights(cfg, snap)
+    model = make_model(cfg, vecnorm, fs)
+    load_weights(model.policy, snap)
+    restore_normalizer(vecnorm, snap)
+    digest = hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
+    run.write("init_from.json", json_text({"policy": str(src), "snapshot": which,
+                                           "policy_sha256": digest}))  # fmt: skip
+    print(f"starting PPO from {src} ({which}/, weights sha256 {digest[:12]})", flush=True)
+    return model
+
+
 def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool) -> int:
     """The phases of :func:`main` (imitation, PPO, final snapshot) on a prepared env.
 
@@ -206,6 +236,8 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         model, demos = imitation_warm_start(
             cfg, fs, lambda mean, var: make_model(cfg, vecnorm, fs, mean, var)
         )
+    elif cfg.init_from:
+        model = _start_from(cfg, run, vecnorm, fs)
     else:
         model = make_model(cfg, vecnorm, fs)
     if model.num_timesteps == 0:
@@ -256,6 +288,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                     callback,
                     critic_warmup(cfg, anchor),
                     update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
+                    *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0 else []),
                     *([progress_bar(cfg)] if cfg.progress else []),
                 ],
                 reset_num_timesteps=start == 0,
