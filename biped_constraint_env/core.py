@@ -72,9 +72,16 @@ def event_infos(rows: list) -> tuple[tuple, tuple]:
     :meth:`~.state.SimArrays.events_of` decodes them; ``switches``: (t, from, to) of each
     model switch; ``events``: (t, name, terminal) of each.
     """
-    switch = int(EventCode.MODE_SWITCH)
-    switches = tuple((r[0], int(r[2]), int(r[3])) for r in rows if int(r[1]) == switch)
-    return switches, tuple((r[0], EVENT_NAMES[int(r[1])], bool(r[4])) for r in rows)
+    switches, events = [], []
+    for t, code, frm, to, terminal in rows:  # one pass: a third of two generators' time
+        c = int(code)
+        if c == _MODE_SWITCH:
+            switches.append((t, int(frm), int(to)))
+        events.append((t, EVENT_NAMES[c], terminal != 0))
+    return tuple(switches), tuple(events)
+
+
+_MODE_SWITCH = int(EventCode.MODE_SWITCH)
 
 
 def _event_rows(sim, i: int) -> list:
@@ -132,6 +139,8 @@ class EnvCore:
         self._ended_by = np.full(n, None, dtype=object)  # the learning termination of a row
         self._any_reason = False
         self._one = np.zeros(1, bool)  # the single env's terminated flag, reused
+        self._posture = np.array(s.start.posture, dtype=np.float64)  # the rest posture (q)
+        self._posture.flags.writeable = False
 
     # ------------------------------------------------------------------ starts
     def draw_starts(self, idx: np.ndarray, rngs, command: float | None = None) -> None:
@@ -142,7 +151,7 @@ class EnvCore:
         """
         s, st = self.settings, self.settings.start
         args = (s.physics.params, s.physics.options, self.sim, idx, rngs, st.start,
-                np.array(st.posture), st.reset_noise_scale)  # fmt: skip
+                self._posture, st.reset_noise_scale)  # fmt: skip
         if self.tracking is not None and self.tracking.ref is not None:
             self.tracking.draw_starts(*args)
         else:
@@ -307,7 +316,7 @@ class EnvCore:
     def _set_reasons(self, terminated: np.ndarray) -> None:
         """The termination reason of every row (None where it goes on)."""
         reasons, sim = self._reasons, self.sim
-        if self._any_reason:
+        if self._any_reason:  # the last period named some: forget them
             reasons[:] = None
         self._any_reason = bool(terminated[0] if self.n == 1 else terminated.any())
         if not self._any_reason:
@@ -315,7 +324,9 @@ class EnvCore:
         for i in (0,) if self.n == 1 else np.flatnonzero(terminated).tolist():
             status = sim.status.item(i)
             if status == STATUS_TERMINATED:  # the terminal event names it
-                reasons[i] = next(EVENT_NAMES[int(r[1])] for r in _event_rows(sim, i) if r[4])
+                ev = sim.events[i]
+                k = next(k for k in range(sim.n_events.item(i)) if ev.item(k, 4))
+                reasons[i] = EVENT_NAMES[int(ev.item(k, 1))]
             elif status == STATUS_NONFINITE:
                 reasons[i] = TERMINATION_NON_FINITE
             elif self.buf.fell.item(i):
@@ -327,10 +338,12 @@ class EnvCore:
         """Forget the last period (after a reset: no events, zero terms, no reasons)."""
         self.sim.n_events[:] = 0
         self._terms = self._no_terms
-        self._reasons[:] = None
-        self._any_reason = False
-        self.perturb.push_ns[:] = 0.0
-        self.perturb.push_dv[:] = 0.0
+        if self._any_reason:
+            self._reasons[:] = None
+            self._any_reason = False
+        if self.perturb.active:  # only pushes write them
+            self.perturb.push_ns[:] = 0.0
+            self.perturb.push_dv[:] = 0.0
         self.action_part.clear(self.buf)
 
     # ------------------------------------------------------------------ observation, info

@@ -83,6 +83,11 @@ def midstride_start(
     values = (rate, theta0, lean, swing, knee, swing_rate)
     if not math.isfinite(sum(values)) or theta0 > 0:  # a NaN or inf makes the sum one
         raise ValueError(f"need finite values and theta0 <= 0, got {values}")
+    return _midstride_state(*values)
+
+
+def _midstride_state(rate, theta0, lean, swing, knee, swing_rate):
+    """:func:`midstride_start` of checked values (the drawn starts' route, every reset)."""
     q1 = -lean - theta0
     q2 = 0.05
     q3 = swing - (theta0 + q1 + q2)
@@ -136,15 +141,15 @@ def sample_start(
 
 def _rest(rng, posture):
     """The ``posture`` at rest in model 1."""
-    return np.array(posture, dtype=np.float64), np.zeros(N_LINKS), int(Mode.FOOT_FLAT)
+    return np.array(posture, dtype=np.float64), np.zeros(N_LINKS), _FOOT_FLAT
 
 
 def _midstride(rng, posture):
     """:func:`midstride_start` with its rate and theta0 drawn, in model 2."""
     rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)
     theta0 = _uniform(rng, *MIDSTRIDE_THETA0_RANGE_RAD)
-    q, qd = midstride_start(rate, theta0)
-    return q, qd, int(Mode.TOE_PIVOT)
+    q, qd = _midstride_state(rate, theta0, *_MIDSTRIDE_SWING)
+    return q, qd, _TOE_PIVOT
 
 
 def _stride(rng, posture):
@@ -161,9 +166,13 @@ def _stride(rng, posture):
     swing_rate = _uniform(rng, *STRIDE_SWING_RATE_RANGE_RAD_S)
     if flat:
         q, qd = flat_foot_stride_start(rate, lean, swing, knee, swing_rate)
-        return q, qd, int(Mode.FOOT_FLAT)
-    q, qd = midstride_start(rate, theta0, swing=swing, knee=knee, swing_rate=swing_rate)
-    return q, qd, int(Mode.TOE_PIVOT)
+        return q, qd, _FOOT_FLAT
+    q, qd = _midstride_state(rate, theta0, _MIDSTRIDE_SWING[0], swing, knee, swing_rate)
+    return q, qd, _TOE_PIVOT
+
+
+_FOOT_FLAT, _TOE_PIVOT = int(Mode.FOOT_FLAT), int(Mode.TOE_PIVOT)
+_MIDSTRIDE_SWING = (0.1, -0.3, -0.6, 0.0)  # midstride_start's lean, swing, knee, swing_rate
 
 
 START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride}
@@ -210,19 +219,21 @@ def draw_starts(
     todo = list(range(len(rows)))
     modes = np.empty(len(rows), np.int64)
     q, qd = sim.q, sim.qd
+    chs, scs = params.packed
+    iopt, fopt = options.packed[:2]
     for _ in range(MAX_START_DRAWS):
         for k in todo:
             i = rows[k]
             q[i], qd[i], modes[k] = sample_start(rngs[k], start, posture, noise_scale)
-        if len(todo) == len(rows):
-            low = start_slots(params, options, sim, idx, modes)
-        else:
-            low = start_slots(params, options, sim, idx[todo], modes[todo])
-        todo = [k for k, z in zip(todo, low.tolist(), strict=True) if z < -POSITION_TOLERANCE_M]
+        some = idx if len(todo) == len(rows) else idx[todo]
+        low = nb_start_batch(chs, scs, q, qd, sim.ist, sim.fst, sim.forces, sim.status,
+                             sim.n_events, some, modes if some is idx else modes[todo], iopt,
+                             fopt).tolist()  # fmt: skip
+        todo = [k for k, z in zip(todo, low, strict=True) if z < -POSITION_TOLERANCE_M]
         if not todo:
             return
     raise ValueError(
-        f"no start above the ground in {MAX_START_DRAWS} draws (lowest z {low.min():.3g} m): "
+        f"no start above the ground in {MAX_START_DRAWS} draws (lowest z {min(low):.3g} m): "
         f"reset_noise_scale={noise_scale!r} is too large for the {start!r} start"
     )
 
