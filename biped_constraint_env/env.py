@@ -114,11 +114,15 @@ class ConstrainedBipedEnv(gym.Env):
     of straight down, the knee bent 0.05-0.6 rad, the thigh turning forward at 0-2 rad/s, the
     foot level), or half of the draws its model-1 counterpart on the flat stance foot (the leg
     leaning -0.3 to 0.3 rad, turning forward at 0.2-0.6 rad/s; ``STRIDE_*`` in :mod:`.starts`):
-    a training start spread over the step's swing with no recorded motion. A dict of weights
-    mixes them, one uniform draw first picking the component (``{"stride": 0.75,
-    "midstride": 0.25}``; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``). All add
-    uniform noise in ``[-s, s]`` (``start={"reset_noise_scale": s}``, 0.01 rad) to q1..q5; the
-    stance toe is at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
+    a training start spread over the step's swing with no recorded motion. ``start="stand"``:
+    model 4 at rest, both feet down (:func:`~.starts.stand_start`: the front foot flat, the
+    rear foot on its toe 0.85-1.15 m behind the front toe with its heel up 0.05-0.2 rad, the
+    hip 0.45-0.75 m behind the front toe at 2.65-2.8 m, knees bent forward; ``STAND_*`` in
+    :mod:`.starts`): standing. A dict of weights mixes them, one uniform draw first picking
+    the component (``{"stride": 0.75, "midstride": 0.25}``; ``"mixed"`` is ``{"rest": 1,
+    "midstride": 1}``). All but "stand" (its rear toe on the ground exactly) add uniform noise
+    in ``[-s, s]`` (``start={"reset_noise_scale": s}``, 0.01 rad) to q1..q5; the stance toe is
+    at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
     starts from any state in the coordinates of docs/conventions.md (validated: points on or
     above the ground, model constraints satisfied; a ``ValueError`` names what is wrong).
 
@@ -293,7 +297,8 @@ class ConstrainedBipedEnv(gym.Env):
       command pays for standing still in model 4 (both feet down) and half its weight in
       models 1-3 (it was the hip-speed kernel in every model); ``max_model_time_s`` counts a
       contact phase's periods under a speed command only (a restart from standing has the
-      whole limit). Added: the command reward's ``effort`` term (weight 0: off).
+      whole limit). Added: the command reward's ``effort`` term (weight 0: off); the
+      ``"stand"`` start (model 4 at rest, both feet down).
 
     Example:
         >>> import gymnasium as gym

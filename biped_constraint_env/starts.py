@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from .advance import nb_start_batch
-from .model import N_LINKS, BipedParams
+from .model import COL_ANGLE, N_LINKS, BipedParams
 from .modes import Mode
 from .simulator import SimArrays, SimOptions, SimState, keypoints
 from .validation import check_array, check_choice, check_int, check_mapping, check_real
@@ -33,6 +33,15 @@ STRIDE_FLAT_LEAN_RANGE_RAD = (-0.3, 0.3)
 STRIDE_FLAT_RATE_RANGE_RAD_S = (-0.6, -0.2)
 """Range of the stance leg's turning rate about the ankle at a stride start on the flat foot
 (model 1) [rad/s] (< 0: forward; the hip 0.6-1.8 m/s)."""
+STAND_HIP_Y_RANGE_M = (-0.75, -0.45)
+"""Range of the hip's position at a standing start, from the front toe [m] (behind it: over
+the front heel, between the feet)."""
+STAND_HIP_Z_RANGE_M = (2.65, 2.8)
+"""Range of the hip's height at a standing start [m] (knees bent; 2.95 m walking)."""
+STAND_TOE_Y_RANGE_M = (-1.15, -0.85)
+"""Range of the rear toe's position at a standing start, from the front toe [m]."""
+STAND_HEEL_UP_RANGE_RAD = (0.05, 0.2)
+"""Range of the rear foot's heel-up angle at a standing start [rad]."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 MAX_RESET_NOISE_RAD = 1.0
@@ -110,7 +119,11 @@ def flat_foot_stride_start(
 
 
 def sample_start(
-    rng: np.random.Generator, start: str | tuple, posture: np.ndarray, noise_scale: float
+    rng: np.random.Generator,
+    start: str | tuple,
+    posture: np.ndarray,
+    noise_scale: float,
+    params: BipedParams,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """(q, qd, mode) of a sampled episode start (``start`` in :func:`start_names`, or a mixture).
 
@@ -128,23 +141,25 @@ def sample_start(
     (:func:`flat_foot_stride_start`: the lean and rate drawn from
     :data:`STRIDE_FLAT_LEAN_RANGE_RAD` and :data:`STRIDE_FLAT_RATE_RANGE_RAD_S` in place of the
     rate and theta0, then the swing leg's three). All add uniform noise in
-    [-noise_scale, noise_scale] to q1..q5 [rad].
+    [-noise_scale, noise_scale] to q1..q5 [rad], but "stand" (:func:`stand_start`: its
+    rear toe on the ground exactly; four draws place the hip and the rear foot).
     """
     if start == "mixed":
         start = "rest" if rng.random() < 0.5 else "midstride"
     elif not isinstance(start, str):
         start = _pick(start, rng.random())
-    q, qd, mode = START_COMPONENTS[start](rng, posture)
-    q[1:] += _uniform(rng, -noise_scale, noise_scale, N_LINKS - 1)
+    q, qd, mode = START_COMPONENTS[start](rng, posture, params)
+    if start not in EXACT_STARTS:
+        q[1:] += _uniform(rng, -noise_scale, noise_scale, N_LINKS - 1)
     return q, qd, mode
 
 
-def _rest(rng, posture):
+def _rest(rng, posture, params):
     """The ``posture`` at rest in model 1."""
     return np.array(posture, dtype=np.float64), np.zeros(N_LINKS), _FOOT_FLAT
 
 
-def _midstride(rng, posture):
+def _midstride(rng, posture, params):
     """:func:`midstride_start` with its rate and theta0 drawn, in model 2."""
     rate = _uniform(rng, *MIDSTRIDE_RATE_RANGE_RAD_S)
     theta0 = _uniform(rng, *MIDSTRIDE_THETA0_RANGE_RAD)
@@ -152,7 +167,7 @@ def _midstride(rng, posture):
     return q, qd, _TOE_PIVOT
 
 
-def _stride(rng, posture):
+def _stride(rng, posture, params):
     """The swing leg drawn along its swing: in model 2, or half the draws on the flat foot."""
     flat = rng.random() < 0.5
     if flat:
@@ -171,14 +186,63 @@ def _stride(rng, posture):
     return q, qd, _TOE_PIVOT
 
 
-_FOOT_FLAT, _TOE_PIVOT = int(Mode.FOOT_FLAT), int(Mode.TOE_PIVOT)
+_FOOT_FLAT, _TOE_PIVOT, _DOUBLE_SUPPORT = (
+    int(Mode.FOOT_FLAT),
+    int(Mode.TOE_PIVOT),
+    int(Mode.DOUBLE_SUPPORT),
+)
 _MIDSTRIDE_SWING = (0.1, -0.3, -0.6, 0.0)  # midstride_start's lean, swing, knee, swing_rate
 
 
-START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride}
-"""The start components by name: each draws (q, qd, mode) from a row's generator and the rest
-posture, before the reset noise. A new start is one entry here (``start`` or a mixture
-``start={"stride": 0.75, "midstride": 0.25}`` names it)."""
+def _knee(a: np.ndarray, b: np.ndarray, l1: float, l2: float) -> np.ndarray:
+    """The knee of a two-link leg from ``a`` to ``b`` (links l1, l2 [m]), bent forward (+y)."""
+    d = b - a
+    dist = math.hypot(d[0], d[1])
+    x = (l1 * l1 - l2 * l2 + dist * dist) / (2.0 * dist)
+    u = d / dist
+    n = np.array([-u[1], u[0]]) if u[1] <= 0.0 else np.array([u[1], -u[0]])
+    return a + x * u + math.sqrt(max(l1 * l1 - x * x, 0.0)) * n
+
+
+def stand_start(
+    params: BipedParams, hip_y: float, hip_z: float, toe_y: float, heel_up: float
+) -> np.ndarray:
+    """The joint angles of a model-4 stance: both feet down, the hip at (hip_y, hip_z) [m].
+
+    The front (stance) foot flat with its toe at y = 0, the rear foot on its toe at ``toe_y``
+    [m] (< 0), its heel up by ``heel_up`` [rad]; each leg's knee found from its hip and ankle
+    (two links), bent forward. Model 4 holds the rear toe on the ground: exact, not perturbed.
+    """
+    chain = params.chain(0)
+    length = [link.length_m for link in chain.links]
+    ankle = np.array([-0.5 * length[0], 0.0])
+    hip = np.array([hip_y, hip_z])
+    rear = np.array([toe_y - 0.5 * length[5] * math.cos(heel_up),
+                     0.5 * length[5] * math.sin(heel_up)])  # fmt: skip
+    k1, k2 = _knee(ankle, hip, length[1], length[2]), _knee(hip, rear, length[3], length[4])
+    phi = [0.0, *(math.atan2(v[1], v[0]) for v in (k1 - ankle, hip - k1, k2 - hip, rear - k2)),
+           -heel_up]  # fmt: skip
+    rel = np.diff(np.concatenate([[0.0], phi])) - chain.packed[:, COL_ANGLE]
+    return np.angle(np.exp(1j * rel))  # each joint angle in (-pi, pi]
+
+
+def _stand(rng, posture, params):
+    """:func:`stand_start` with its hip and rear foot drawn, at rest in model 4."""
+    hip_y = _uniform(rng, *STAND_HIP_Y_RANGE_M)
+    hip_z = _uniform(rng, *STAND_HIP_Z_RANGE_M)
+    toe_y = _uniform(rng, *STAND_TOE_Y_RANGE_M)
+    heel_up = _uniform(rng, *STAND_HEEL_UP_RANGE_RAD)
+    q = stand_start(params, hip_y, hip_z, toe_y, heel_up)
+    return q, np.zeros(N_LINKS), _DOUBLE_SUPPORT
+
+
+START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride, "stand": _stand}
+"""The start components by name: each draws (q, qd, mode) from a row's generator, the rest
+posture and the robot, before the reset noise. A new start is one entry here (``start`` or a
+mixture ``start={"stride": 0.75, "midstride": 0.25}`` names it)."""
+EXACT_STARTS = frozenset({"stand"})
+"""Components whose state meets a contact constraint exactly: no reset noise (their draws vary
+them)."""
 
 
 def start_names() -> tuple[str, ...]:
@@ -224,7 +288,7 @@ def draw_starts(
     for _ in range(MAX_START_DRAWS):
         for k in todo:
             i = rows[k]
-            q[i], qd[i], modes[k] = sample_start(rngs[k], start, posture, noise_scale)
+            q[i], qd[i], modes[k] = sample_start(rngs[k], start, posture, noise_scale, params)
         some = idx if len(todo) == len(rows) else idx[todo]
         low = nb_start_batch(chs, scs, q, qd, sim.ist, sim.fst, sim.forces, sim.status,
                              sim.n_events, some, modes if some is idx else modes[todo], iopt,

@@ -35,7 +35,7 @@ def _single_and_batched(kw, steps=5, n=3, action=None):
 
 
 def test_a_new_start_component_is_one_entry(monkeypatch):
-    def crouch(rng, posture):  # the rest posture, knees bent a little more
+    def crouch(rng, posture, params):  # the rest posture, knees bent a little more
         q = np.array(posture, dtype=np.float64)
         q[2] -= 0.05 + 0.05 * rng.random()
         return q, np.zeros(6), int(Mode.FOOT_FLAT)

@@ -61,6 +61,36 @@ def test_rest_start_is_the_fig2_posture_at_rest():
     assert info["mode"] == 1 and at_rest(state_from_obs(obs))
 
 
+def test_stand_start_is_an_exact_double_support_at_rest_in_both_envs():
+    from biped_constraint_env.starts import (
+        STAND_HIP_Y_RANGE_M,
+        STAND_HIP_Z_RANGE_M,
+        STAND_TOE_Y_RANGE_M,
+        stand_start,
+    )  # fmt: skip
+
+    env = gym.make("ConstrainedBiped-v0", start="stand").unwrapped
+    venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
+                        start="stand")  # fmt: skip
+    vobs, _ = venv.reset(seed=3)
+    for i in range(4):
+        obs, info = env.reset(seed=3 + i)
+        np.testing.assert_array_equal(obs, vobs[i])  # row i is the single env seeded 3 + i
+        st, kp = env.state, env.keypoints()
+        assert info["mode"] == 4 and not st.qd.any()
+        assert kp["stance_toe"][1] == 0.0 and abs(kp["stance_heel"][1]) < 1e-12  # flat
+        assert abs(kp["swing_toe"][1]) < 1e-12 < kp["swing_heel"][1]  # rear toe down, heel up
+        assert STAND_TOE_Y_RANGE_M[0] <= kp["swing_toe"][0] <= STAND_TOE_Y_RANGE_M[1]
+        assert STAND_HIP_Y_RANGE_M[0] <= kp["hip"][0] <= STAND_HIP_Y_RANGE_M[1]
+        assert STAND_HIP_Z_RANGE_M[0] <= kp["hip"][1] <= STAND_HIP_Z_RANGE_M[1]
+        assert kp["stance_knee"][0] > kp["stance_ankle"][0]  # knees bent forward
+    q = stand_start(env.params, -0.6, 2.75, -1.0, 0.1)  # the construction is the stance asked
+    env.reset(options={"q": q, "qd": np.zeros(6), "mode": 4})
+    kp = env.keypoints()
+    np.testing.assert_allclose(kp["hip"], [-0.6, 2.75], atol=1e-12)
+    np.testing.assert_allclose(kp["swing_toe"], [-1.0, 0.0], atol=1e-12)
+
+
 def _first_step(ctl, env_kw, seed=0, limit_s=5.0):
     env = gym.make("ConstrainedBiped-v0", **env_kw)
     obs, info = env.reset(seed=seed)
