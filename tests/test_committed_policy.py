@@ -155,7 +155,8 @@ def test_committed_level2_policy_walks_with_no_recorded_motion():
         assert s.reward.kind == "gait" and s.action.kind == "torque" and not s.needs_reference
         assert s.dt == 0.02 and s.observation.phase_obs and s.physics.options.strict
         assert s.physics.preset == "default"
-    assert train.start.start == "stride" and run.start.start == "midstride"
+    assert dict(train.start.start) == {"stride": 0.75, "midstride": 0.25}
+    assert run.start.start == "midstride"
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), [0], cfg.env_id,
                          episode_s=30)  # fmt: skip
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
