@@ -286,6 +286,14 @@ def draw_starts(
     chs, scs = params.packed
     iopt, fopt = options.packed[:2]
     for _ in range(MAX_START_DRAWS):
+        if len(rows) == 1:  # the single env, a batch's lone reset: the same draws, shorter
+            q[rows[0]], qd[rows[0]], modes[0] = sample_start(rngs[0], start, posture,
+                                                             noise_scale, params)  # fmt: skip
+            low = nb_start_batch(chs, scs, q, qd, sim.ist, sim.fst, sim.forces, sim.status,
+                                 sim.n_events, idx, modes, iopt, fopt).tolist()  # fmt: skip
+            if low[0] >= -POSITION_TOLERANCE_M:
+                return
+            continue
         for k in todo:
             i = rows[k]
             q[i], qd[i], modes[k] = sample_start(rngs[k], start, posture, noise_scale, params)
