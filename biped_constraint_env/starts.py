@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from .advance import nb_start_batch
+from .hybrid import wrap_angles
 from .model import COL_ANGLE, N_LINKS, BipedParams
 from .modes import Mode
 from .simulator import SimArrays, SimOptions, SimState, keypoints
@@ -223,7 +224,7 @@ def stand_start(
     phi = [0.0, *(math.atan2(v[1], v[0]) for v in (k1 - ankle, hip - k1, k2 - hip, rear - k2)),
            -heel_up]  # fmt: skip
     rel = np.diff(np.concatenate([[0.0], phi])) - chain.packed[:, COL_ANGLE]
-    return np.angle(np.exp(1j * rel))  # each joint angle in (-pi, pi]
+    return wrap_angles(rel)
 
 
 def _stand(rng, posture, params):
