@@ -128,6 +128,7 @@ class EnvCore:
         self._after = self._after_hooks()
         self._blocks = self._observation_blocks()
         self._post_obs = [self.perturb.observe] if s.perturbations.obs_noise is not None else []
+        self._plain_obs = not self._blocks and not self._post_obs  # the compiled one as it is
         self._extras = self._info_extras()
         self.reward_keys = s.reward.info_keys
         self.info_keys = (
@@ -360,6 +361,12 @@ class EnvCore:
             obs = post(obs, rngs, range(self.n) if rows is None else rows)
         return obs.copy() if obs is self.buf.obs else obs
 
+    def first_observation(self, rngs) -> np.ndarray:
+        """Row 0's observation (the single env's), a fresh (dim,) array."""
+        if self._plain_obs:
+            return self.buf.obs[0].copy()
+        return self.observation(rngs)[0]
+
     def info(self, row: int | None = None) -> dict[str, Any]:
         """The last period's (or reset's) ``info``.
 
@@ -375,10 +382,11 @@ class EnvCore:
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
                    "t": f[FS_T], "hip_y": self.hip.item(row, 0), "root_y": f[FS_ROOT],
                    "switches": switches, "events": events,
-                   "termination_reason": self._reasons[row],
+                   "termination_reason": self._reasons.item(row),
                    "motor_work_pos_j": f[FS_WORK_POS], "motor_work_abs_j": f[FS_WORK_ABS],
                    "damping_loss_j": f[FS_DAMPED]}  # fmt: skip
-            out.update(zip(self.reward_keys, self._terms[row].tolist(), strict=True))
+            for key, value in zip(self.reward_keys, self._terms[row].tolist(), strict=True):
+                out[key] = value  # (a third faster than dict.update here)
         else:
             switches = np.empty(self.n, dtype=object)
             events = np.empty(self.n, dtype=object)

@@ -329,6 +329,8 @@ class ConstrainedBipedEnv(gym.Env):
         self.observation_space = self.core.observation_space
         self._act = self.core.buf.act
         self._rows = np.zeros(1, np.int64)
+        limit = s.time_limit_s  # truncation at t >= limit (to round-off); None: never
+        self._t_limit = np.inf if limit is None else limit - 1e-9
         self._renderer = None
         self._needs_reset = True  # until a reset succeeds, and again after a termination
 
@@ -365,7 +367,7 @@ class ConstrainedBipedEnv(gym.Env):
         info = self.core.info(0)
         if self.render_mode == "human":
             self.render()
-        return self.core.observation(rngs)[0], info
+        return self.core.first_observation(rngs), info
 
     def step(self, action):
         """Apply the action for one control period (see the class docstring)."""
@@ -377,16 +379,15 @@ class ConstrainedBipedEnv(gym.Env):
         if a.shape != (N_ACTUATED,) or a.dtype.kind not in "fiu":
             act = self.settings.action
             validate_action(a, act.bound, act.out_of_range, act.bound_name)
-        rngs = self._rngs
-        rewards, terminated = self.core.period(a[None, :], rngs)
-        info = self.core.info(0)
-        done = bool(terminated[0])
-        limit = self.settings.time_limit_s
-        truncated = not done and limit is not None and info["t"] >= limit - 1e-9
+        core, rngs = self.core, self._rngs
+        rewards, terminated = core.period(a[None, :], rngs)
+        info = core.info(0)
+        done = terminated.item(0)
+        truncated = not done and info["t"] >= self._t_limit
         self._needs_reset = done or truncated
         if self.render_mode == "human":
             self.render()
-        return self.core.observation(rngs)[0], float(rewards[0]), done, truncated, info
+        return core.first_observation(rngs), rewards.item(0), done, truncated, info
 
     def set_command(self, v: float) -> None:
         """Set the commanded forward speed [m/s], as a joystick would (``task="command"``).

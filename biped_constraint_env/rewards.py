@@ -270,7 +270,15 @@ def check_fall_height(fall_hip_height_m) -> float | None:
 
 # ----------------------------------------------------------------------------- reward parts
 class EnvRewardPart:
-    """The env's own reward: the compiled period's terms (:func:`nb_reward_terms`)."""
+    """The env's own reward: the compiled period's terms (:func:`nb_reward_terms`).
+
+    Every part's :meth:`after` gives (terms (n, k), rewards (n,)) that the next period may
+    overwrite (here: views of the record); the vector env copies its rewards.
+    """
+
+    def __init__(self):
+        """Views of the record are made at the first period (the core's buffers)."""
+        self._views = None
 
     def before(self, core):
         """Nothing to remember before the period."""
@@ -278,8 +286,10 @@ class EnvRewardPart:
 
     def after(self, core, snap, terminated, skip):
         """(terms (n, k), rewards (n,)) of the period, as the compiled call wrote them."""
-        rew = core.buf.rew
-        return rew[:, : len(REWARD_TERMS)], rew[:, N_ENV_TERMS - 1].copy()
+        if self._views is None:
+            rew = core.buf.rew
+            self._views = rew[:, : len(REWARD_TERMS)], rew[:, N_ENV_TERMS - 1]
+        return self._views
 
 
 class TrackingRewardPart:
@@ -296,7 +306,7 @@ class TrackingRewardPart:
                                      ~terminated)  # fmt: skip
         if skip is not None:
             track[skip] = 0.0
-        return track[:, :-1], track[:, -1].copy()
+        return track[:, :-1], track[:, -1]
 
 
 class GaitRewardPart:
@@ -315,7 +325,7 @@ class GaitRewardPart:
                               tau_sq=rec[:, REC_TAU_SQ])  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
-        return out[:, :-1], out[:, -1].copy()
+        return out[:, :-1], out[:, -1]
 
 
 class CommandRewardPart:
@@ -335,7 +345,7 @@ class CommandRewardPart:
                                         tau_sq=rec[:, REC_TAU_SQ])  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
-        return out[:, :-1], out[:, -1].copy()
+        return out[:, :-1], out[:, -1]
 
 
 REWARD_PARTS = {"env": EnvRewardPart, "tracking": TrackingRewardPart, "gait": GaitRewardPart,

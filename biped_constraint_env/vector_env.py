@@ -151,6 +151,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             self._reset_rows(resetting)
         skip = resetting if resetting.size else None
         rewards, terminated = self.core.period(act, self._rngs, skip)
+        rewards = rewards.copy()  # the core's may be a view the next period overwrites
         self._elapsed += 1
         self._elapsed[resetting] = 0
         infos = self.core.info()
