@@ -120,11 +120,14 @@ class ConstrainedBipedEnv(gym.Env):
     hip 0.45-0.75 m behind the front toe at 2.65-2.8 m, knees bent forward; ``STAND_*`` in
     :mod:`.starts`): standing. A dict of weights mixes them, one uniform draw first picking
     the component (``{"stride": 0.75, "midstride": 0.25}``; ``"mixed"`` is ``{"rest": 1,
-    "midstride": 1}``). All but "stand" (its rear toe on the ground exactly) add uniform noise
-    in ``[-s, s]`` (``start={"reset_noise_scale": s}``, 0.01 rad) to q1..q5; the stance toe is
-    at y = 0. ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})``
-    starts from any state in the coordinates of docs/conventions.md (validated: points on or
-    above the ground, model constraints satisfied; a ``ValueError`` names what is wrong).
+    "midstride": 1}``). The ``"reference"`` component starts at a recorded state of the
+    reference walk (below; ``start="reference"``: every start), drawn first by a draw of its
+    own, the other components then as a start of their own. All but "stand" (its rear toe on
+    the ground exactly) add uniform noise in ``[-s, s]`` (``start={"reset_noise_scale": s}``,
+    0.01 rad) to q1..q5; the stance toe is at y = 0.
+    ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})`` starts from any state in
+    the coordinates of docs/conventions.md (validated: points on or above the ground, model
+    constraints satisfied; a ``ValueError`` names what is wrong).
 
     ## Episode End
     ### Termination
@@ -173,8 +176,8 @@ class ConstrainedBipedEnv(gym.Env):
     | | | step [s], dividing dt; = dt holds the PD torque) |
     | start | "midstride" | a start's name (Starting State), a dict of component weights, or |
     | | | a dict: "kind" (either), "posture" (``NOMINAL_POSTURE_RAD``: the rest posture [rad]), |
-    | | | "reset_noise_scale" (0.01: noise on q1..q5 [rad]), "rsi" (0: the fraction of |
-    | | | resets at recorded reference states) |
+    | | | "reset_noise_scale" (0.01: noise on q1..q5 [rad]); the components "rest", |
+    | | | "midstride", "stride", "stand", "reference" (recorded reference states) |
     | reward | "env" | "env" (Rewards), "tracking" (a reference walk's; below), "gait" (the task |
     | | | and the contact clock, no recording; below), "command", or {"kind", "weights", |
     | | | "kernels", "targets", "gated"}: any term's weight, kernel or target (:mod:`.rewards`) |
@@ -204,10 +207,10 @@ class ConstrainedBipedEnv(gym.Env):
     ## Tracking task
     Options for learning from a reference walk (:mod:`.tracking`; the default env uses none):
     ``reward="tracking"`` is a DeepMimic-style sum of exponential kernels of the pose, rate, hip
-    height and hip speed errors against the reference at the contact clock, plus 1 per
-    completed step (``info["reward_<term>"]``); ``start={"rsi": f}`` starts the fraction f of
-    the episodes at recorded reference states; ``action="pd"`` makes the action five joint
-    targets, tracked by the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains
+    height and hip speed errors against the reference at the contact clock, plus 1 per completed
+    step (``info["reward_<term>"]``); ``start={"reference": f, "midstride": 1 - f}`` starts the
+    fraction f of the episodes at recorded reference states; ``action="pd"`` makes the action five
+    joint targets, tracked by the PD law ``Kp (target - q) + Kd (rate - q-dot)`` with gains
     ``PD_KP``, ``PD_KD``: the targets hold over the control period and the law, clipped to the
     torque limit, is evaluated at every physics step ``action["dt"]`` inside it, as legged-robot
     envs do (decimation; 20 ms periods apply their targets through four 5 ms PD updates).
@@ -298,7 +301,10 @@ class ConstrainedBipedEnv(gym.Env):
       models 1-3 (it was the hip-speed kernel in every model); ``max_model_time_s`` counts a
       contact phase's periods under a speed command only (a restart from standing has the
       whole limit). Added: the command reward's ``effort`` term (weight 0: off); the
-      ``"stand"`` start (model 4 at rest, both feet down).
+      ``"stand"`` start (model 4 at rest, both feet down). Changed: the reference-state
+      starts are the start mixture's ``"reference"`` component (``start={"kind": "mixed",
+      "rsi": 0.5}`` is ``start={"reference": 0.5, "rest": 0.25, "midstride": 0.25}``, draw
+      for draw); ``rsi`` is refused naming it.
 
     Example:
         >>> import gymnasium as gym

@@ -38,6 +38,7 @@ from .starts import (
     NOMINAL_POSTURE_RAD,
     RESET_NOISE_SCALE_RAD,
     check_start_settings,
+    split_reference,
     start_name,
 )
 from .tasks import TASKS, resolve_options, resolve_task
@@ -46,15 +47,14 @@ from .validation import (
     check_choice,
     check_mapping,
     check_names,
-    check_real,
 )
 
 PHYSICS_KEYS = ("integrator", "substeps", "impact", "locate_events", "jdot", "strict",
                 "heel_force_includes_foot_weight", "step_tol", "stop_at_switch")  # fmt: skip
 """Keys of the ``physics`` dict: :class:`~.options.SimOptions` overrides on top of the preset."""
-START_KEYS = ("kind", "posture", "reset_noise_scale", "rsi")
-"""Keys of the ``start`` dict: the start (a name or component weights), the rest posture
-(6,) [rad], the reset noise [rad] and the fraction of reference-state starts."""
+START_KEYS = ("kind", "posture", "reset_noise_scale")
+"""Keys of the ``start`` dict: the start (a name or component weights, the reference states'
+among them), the rest posture (6,) [rad] and the reset noise [rad]."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ class PhysicsSettings:
 
 @dataclass(frozen=True)
 class StartSettings:
-    """The start distribution, rest posture, reset noise and the rsi fraction.
+    """The start distribution, rest posture and reset noise.
 
     The distribution is a name, or a mixture ((component, weight), ...).
     """
@@ -77,7 +77,11 @@ class StartSettings:
     start: str | tuple[tuple[str, float], ...]
     posture: tuple[float, ...]
     reset_noise_scale: float
-    rsi: float
+
+    @property
+    def reference_fraction(self) -> float:
+        """The fraction of starts at a reference state (the ``"reference"`` component)."""
+        return split_reference(self.start)[0]
 
 
 @dataclass(frozen=True)
@@ -131,7 +135,8 @@ class EnvSettings:
     @property
     def needs_reference(self) -> bool:
         """Whether an option reads the reference walk (reward, starts, observation, PD base)."""
-        return self.reward.kind == "tracking" or self.start.rsi > 0 or self.action.needs_reference
+        return (self.reward.kind == "tracking" or self.start.reference_fraction > 0
+                or self.action.needs_reference)  # fmt: skip
 
     @property
     def needs_clock(self) -> bool:
@@ -199,6 +204,11 @@ def _reference(reference: Any, start: str | tuple) -> str:
     return reference
 
 
+RSI_MOVED = ("start={'kind': {'reference': 0.5, 'midstride': 0.5}} (the reference states "
+             "are a start component; its weight is their fraction)")  # fmt: skip
+"""Where the fraction of reference-state starts went (a refused ``rsi`` names it)."""
+
+
 def start_dict(spec: Any) -> dict[str, Any]:
     """A ``start`` value as a dict of :data:`START_KEYS` (a name or weights: its ``kind``).
 
@@ -206,6 +216,8 @@ def start_dict(spec: Any) -> dict[str, Any]:
     """
     if spec is None:
         return {}
+    if isinstance(spec, dict) and "rsi" in spec:
+        raise ValueError(f"start's 'rsi' moved: {RSI_MOVED}")
     if isinstance(spec, dict) and set(spec) & set(START_KEYS):
         return dict(check_mapping("start", spec, START_KEYS))
     return {"kind": spec}
@@ -293,12 +305,7 @@ def make_settings(
     return EnvSettings(
         task=task,
         physics=PhysicsSettings(params, t["preset"], options, dt),
-        start=StartSettings(
-            start_kind,
-            tuple(q0.tolist()),
-            noise,
-            check_real("start rsi", st.get("rsi", 0.0), 0.0, 1.0),
-        ),  # fmt: skip
+        start=StartSettings(start_kind, tuple(q0.tolist()), noise),
         action=action_settings(action, task_t.get("action", "torque"), dt),
         reward=reward_s,
         observation=_observation(t["observation"], commands is not None),
@@ -320,7 +327,8 @@ RETIRED = {
 MOVED = {
     **{k: f"physics={{{k!r}: ...}}" for k in PHYSICS_KEYS},
     **{k: f"action={{{k!r}: ...}}" for k in ("torque_limit_nm", "out_of_range")},
-    **{k: f"start={{{k!r}: ...}}" for k in ("posture", "reset_noise_scale", "rsi")},
+    **{k: f"start={{{k!r}: ...}}" for k in ("posture", "reset_noise_scale")},
+    "rsi": RSI_MOVED,
     **{k: f"termination={{{k!r}: ...}}" for k in termination_keys()},
     "phase_obs": "observation=['phase']",
     **{k: f"reward={{'kind': 'env', 'weights': {{{t!r}: ...}}}}"

@@ -246,9 +246,35 @@ EXACT_STARTS = frozenset({"stand"})
 them)."""
 
 
+REFERENCE_START = "reference"
+"""The start component at a state of the reference walk, drawn uniformly with its clock
+(reference-state initialisation): the part that holds the walk draws it
+(:meth:`~.tracking.Tracking.draw_starts`); its weight in a mixture is the fraction of such
+starts. It draws first, one uniform draw per start; the other components then draw as a
+start of their own (:func:`split_reference`)."""
+
+
 def start_names() -> tuple[str, ...]:
-    """Named values of the env's ``start``: every component, and "mixed" (rest, mid-stride)."""
-    return (*START_COMPONENTS, "mixed")
+    """Named values of the env's ``start``: the components, "mixed" and "reference"."""
+    return (*START_COMPONENTS, "mixed", REFERENCE_START)
+
+
+def split_reference(start: str | tuple) -> tuple[float, str | tuple | None]:
+    """(the reference component's weight, the other starts) of a checked ``start``.
+
+    The other components keep their order, renormalised; one left is its name, none None. A
+    start without the reference is (0.0, ``start``).
+    """
+    if start == REFERENCE_START:
+        return 1.0, None
+    if isinstance(start, str) or REFERENCE_START not in dict(start):
+        return 0.0, start
+    weight = dict(start)[REFERENCE_START]
+    own = [(name, w) for name, w in start if name != REFERENCE_START]
+    if len(own) <= 1:
+        return weight, own[0][0] if own else None
+    total = sum(w for _, w in own)
+    return weight, tuple((name, w / total) for name, w in own)
 
 
 def _pick(mixture: tuple, u: float) -> str:
@@ -411,11 +437,12 @@ def check_start_kind(start: Any) -> str | tuple[tuple[str, float], ...]:
     if not isinstance(start, dict):
         raise ValueError(
             f"start must be one of {start_names()} or a mixture {{component: weight}} of "
-            f"{tuple(START_COMPONENTS)}, got {start!r}"
+            f"{(*START_COMPONENTS, REFERENCE_START)}, got {start!r}"
         )
-    check_mapping("start mixture", start, tuple(START_COMPONENTS))
+    components = (*START_COMPONENTS, REFERENCE_START)
+    check_mapping("start mixture", start, components)
     if not start:
-        raise ValueError(f"a start mixture names at least one of {tuple(START_COMPONENTS)}")
+        raise ValueError(f"a start mixture names at least one of {components}")
     weights = {k: check_real(f"start weight of {k!r}", w, 0.0, 1e6) for k, w in start.items()}
     total = sum(weights.values())
     if total <= 0:

@@ -56,7 +56,7 @@ TASKS: dict[str, dict[str, Any]] = {
         "preset": "default",
         "dt": 0.005,
         "physics": {"stop_at_switch": True},
-        "start": {"kind": "midstride", "rsi": 0.5},
+        "start": {"reference": 0.5, "midstride": 0.5},
         "reward": "tracking",
         "action": {"kind": "pd", "around": "reference", "offset": TRACK_PD_OFFSET_RAD},
         "observation": ("phase",),

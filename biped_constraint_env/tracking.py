@@ -13,8 +13,9 @@ phase. The default env uses none of it.
   kernels: :data:`~.rewards.REWARD_KINDS`). Every term is positive, so ending an episode
   early never pays; a period ended by an event earns no kernel terms. ``info["reward_<term>"]``
   gives each term.
-* ``rsi`` (reference-state initialisation): that fraction of the resets starts at a recorded
-  reference state drawn uniformly (its clock with it); the others draw the env's ``start``.
+* ``start={"kind": {"reference": w, ...}}`` (reference-state initialisation): the fraction w
+  of the resets starts at a recorded reference state drawn uniformly (its clock with it); the
+  others draw the start's other components.
 * A policy sees the phase only (``phase_obs``: the first-step flag and the time in the
   model, which with the model one-hot is the clock), never the reference itself.
 * ``action={"kind": "pd", ...}``: the action in [-1, 1]^5 sets joint targets
@@ -47,7 +48,7 @@ from .reference import (
     Reference,
     load_reference,
 )
-from .starts import draw_starts, start_slots
+from .starts import draw_starts, split_reference, start_slots
 from .state import ST_MODE
 
 if TYPE_CHECKING:
@@ -142,18 +143,20 @@ class Tracking:
     def draw_starts(self, params, options, sim, idx, rngs, start, posture, noise) -> None:
         """Start slots ``idx`` (slot ``idx[k]`` drawing from ``rngs[k]``) and their clocks.
 
-        With ``rsi`` > 0 each slot first draws whether it starts at a reference state (with
-        two references, then which); the others draw the env's ``start``
-        (:func:`~.starts.draw_starts`). With ``rsi`` = 0 the draws are exactly the env's own.
+        The start's ``"reference"`` component (:data:`~.starts.REFERENCE_START`, weight w)
+        draws first: each slot draws whether it starts at a reference state (u < w; with two
+        references, then which; then the row, uniformly); the others draw the start's other
+        components (:func:`~.starts.split_reference`, :func:`~.starts.draw_starts`). Without
+        the component the draws are exactly the env's own.
         """
         idx = np.asarray(idx, np.int64)
-        rsi = self.settings.start.rsi
+        weight, start = split_reference(start)
         on_ref = np.zeros(idx.shape[0], bool)
         rows = np.zeros(idx.shape[0], np.int64)
         refs = np.zeros(idx.shape[0], np.int64)
-        if rsi > 0:
+        if weight > 0:
             for k in range(idx.shape[0]):
-                if rngs[k].random() < rsi:
+                if rngs[k].random() < weight:
                     on_ref[k] = True
                     if len(self.refs) > 1:
                         refs[k] = rngs[k].integers(len(self.refs))

@@ -43,7 +43,7 @@ def evaluate(model, env, dt=0.005, episodes=200, first_seed=500_000) -> dict:
         return model.predict(env.normalize_obs(obs), deterministic=True)[0]
 
     seeds = range(first_seed, first_seed + episodes)  # the report seeds; no reference starts
-    kw = {"task": "track", "start": {"rsi": 0.0}, "dt": dt}  # 30 s episodes (the env's time limit)
+    kw = {"task": "track", "start": "midstride", "dt": dt}  # 30 s episodes (the env's time limit)
     eps = run_episodes_batched(act, kw, seeds)
     return success([e["steps_completed"] for e in eps])
 

@@ -148,17 +148,10 @@ def test_training_has_no_import_circle():
         visit(m, [])
 
 
-def test_the_cores_period_only_sequences_its_parts():
-    """EnvCore.period: at most 25 lines and 3 branches; the reward kinds are parts chosen by
-    name (rewards.REWARD_PARTS), the extra terminations a list."""
-    tree = ast.parse((PKG / "core.py").read_text())
-    core = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "EnvCore")
-    period = next(n for n in core.body if isinstance(n, ast.FunctionDef) and n.name == "period")
-    body = period.body[1:] if isinstance(period.body[0], ast.Expr) else period.body  # docstring
-    lines = body[-1].end_lineno - body[0].lineno + 1
-    branches = sum(isinstance(n, ast.If | ast.For | ast.While | ast.Try | ast.IfExp)
-                   for n in ast.walk(period))  # fmt: skip
-    assert lines <= 25 and branches <= 3, (lines, branches)
+def test_every_reward_kind_has_its_part():
+    """The reward kinds (their terms registered by the kinds' own modules, which the env
+    imports) are parts chosen by name (rewards.REWARD_PARTS)."""
+    import biped_constraint_env.env  # noqa: F401  (imports every reward kind's module)
     from biped_constraint_env.rewards import REWARD_KINDS, REWARD_PARTS
 
     assert set(REWARD_PARTS) == set(REWARD_KINDS)

@@ -101,8 +101,10 @@ def test_committed_from_scratch_policy_learned_without_a_teacher_and_walks():
     assert cfg.teacher == "" and cfg.base_controller == "" and cfg.bc_anchor_steps == 0
     assert not available(SCRATCH, "imitation")  # no warm start of any kind
     s = cfg.settings()
-    assert s.reward.kind == "tracking" and s.action.pd and cfg.train_env["start"]["rsi"] > 0
-    assert s.start.rsi == 0.0 and s.physics.preset == "default" and s.start.start == "midstride"
+    assert s.reward.kind == "tracking" and s.action.pd
+    assert cfg.train_env["start"]["kind"]["reference"] > 0  # reference states in training only
+    assert s.start.reference_fraction == 0.0 and s.physics.preset == "default"
+    assert s.start.start == "midstride"
     kw = cfg.env_kwargs()
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id)
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
@@ -177,7 +179,7 @@ def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
     assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
     s = cfg.settings()
     assert s.action.kind == "torque" and s.dt == 0.02 and s.physics.preset == "default"
-    assert s.observation.phase_obs and s.start.rsi == 0.0
+    assert s.observation.phase_obs and s.start.reference_fraction == 0.0
     for start in ("rest", "midstride"):
         kw = {**cfg.env_kwargs(), "start": start}
         (ep,) = run_episodes(policy_actor(policy, norm, cfg), kw, [0], cfg.env_id, episode_s=30)

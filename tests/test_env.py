@@ -376,16 +376,17 @@ def test_the_track_task_is_the_from_scratch_recipes_settings():
     import gymnasium as gym
 
     s = gym.make("ConstrainedBiped-v0", task="track").unwrapped.settings
-    assert s.reward.kind == "tracking" and s.start.rsi == 0.5 and s.action.kind == "pd"
+    assert s.reward.kind == "tracking" and s.start.reference_fraction == 0.5
+    assert s.action.kind == "pd"
     assert s.action.around == "reference" and s.action.offset == ((0.2, 0, 0, 0, 0),) * 4
     assert s.observation.phase_obs and s.dt == 0.005
     narrower = gym.make("ConstrainedBiped-v0", task="track", action={"range": 0.5}).unwrapped
     assert narrower.settings.action.range == 0.5  # merged onto the task's PD mapping
     assert narrower.settings.action.around == "reference"
     plain = gym.make(
-        "ConstrainedBiped-v0", task="track", start={"rsi": 0.0}, action="torque"
+        "ConstrainedBiped-v0", task="track", start="midstride", action="torque"
     ).unwrapped
-    assert plain.settings.start.rsi == 0.0 and not plain.settings.action.pd
+    assert plain.settings.start.reference_fraction == 0.0 and not plain.settings.action.pd
     walk = gym.make("ConstrainedBiped-v0").unwrapped
     assert walk.settings.reward.kind == "env" and not walk.settings.action.pd
     assert "reward=RewardSettings(kind='env'" in repr(walk)

@@ -20,7 +20,7 @@ OPTIONS = [
     },
     {"task": "paper"},
     {"observation": ["phase"], "start": "mixed"},
-    {"reward": "tracking", "start": {"rsi": 0.5}, "observation": ["phase"]},
+    {"reward": "tracking", "start": {"reference": 0.5, "midstride": 0.5}, "observation": ["phase"]},
     {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}},
     {"action": {"kind": "pd", "around": "reference"}, "reward": "tracking", "dt": 0.01},
     {"perturbations": {"push_impulse_ns": -0.3, "push_at_s": 0.1, "obs_noise": (1e-3, 1e-2)}},

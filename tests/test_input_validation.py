@@ -53,7 +53,7 @@ def test_bad_make_kwarg_is_refused_by_name(kwargs, name):
 @pytest.mark.parametrize(
     ("old", "where"),
     [("strict", "physics={'strict'"), ("stop_at_switch", "physics={'stop_at_switch'"),
-     ("torque_limit_nm", "action={'torque_limit_nm'"), ("rsi", "start={'rsi'"),
+     ("torque_limit_nm", "action={'torque_limit_nm'"), ("rsi", "{'reference': 0.5"),
      ("posture", "start={'posture'"), ("time_limit_s", "termination={'time_limit_s'"),
      ("phase_obs", "observation=['phase']"), ("alive_bonus", "'weights': {'alive'")],
 )  # fmt: skip

@@ -54,6 +54,6 @@ def test_batched_episodes_that_end_at_once_equal_single_ones():
 def test_report_episodes_last_30_s_at_any_control_period():
     """``episode_s``: the time limit in seconds (1500 periods at 20 ms, not the registered
     6000 periods, which would be 120 s)."""
-    kw = {"task": "track", "dt": 0.02, "start": {"rsi": 0.0}}
+    kw = {"task": "track", "dt": 0.02, "start": "midstride"}
     (ep,) = run_episodes_batched(lambda o: np.zeros((len(o), 5)), kw, [0], episode_s=0.1)
     assert ep["end"] == "time_limit" and ep["t_s"] == pytest.approx(0.1)

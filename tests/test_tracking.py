@@ -9,9 +9,12 @@ from biped_constraint_env.actions import PD_FIXED_POSE_RAD, PD_KD, PD_KP
 from biped_constraint_env.env import ConstrainedBipedEnv
 from biped_constraint_env.reference import load_reference
 from biped_constraint_env.rewards import REWARD_KINDS
+from biped_constraint_env.starts import split_reference
 
-TRACK = {"reward": "tracking", "start": {"rsi": 0.5}, "action": {"kind": "pd",
-         "around": "reference", "range": 0.5}, "observation": ["phase"]}  # fmt: skip
+TRACK = {"reward": "tracking", "start": {"reference": 0.5, "midstride": 0.5},
+         "action": {"kind": "pd", "around": "reference", "range": 0.5},
+         "observation": ["phase"]}  # fmt: skip
+MIXED_AND_REFERENCE = {"reference": 0.5, "rest": 0.25, "midstride": 0.25}
 TERMS = {t.name: t for t in REWARD_KINDS["tracking"]}
 
 
@@ -74,7 +77,7 @@ def test_kernel_terms_are_their_weights_on_the_reference_and_fall_as_documented(
 
 
 def test_env_reward_is_the_sum_of_the_tracking_terms_in_info():
-    env = gym.make("ConstrainedBiped-v0", reward="tracking", start={"rsi": 1.0},
+    env = gym.make("ConstrainedBiped-v0", reward="tracking", start="reference",
                    action={"kind": "pd", "around": "reference"})  # fmt: skip
     env.reset(seed=1)
     seen = 0
@@ -116,7 +119,10 @@ def test_pd_targets_give_the_documented_torques(offset):
     [
         TRACK,
         {"action": "pd"},
-        {"action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]}, "start": {"rsi": 0.3}},
+        {
+            "action": {"kind": "pd", "offset": [0.2, 0, 0, 0, 0]},
+            "start": {"reference": 0.3, "midstride": 0.7},
+        },
     ],
 )
 def test_tracking_options_single_equals_batched(kw):
@@ -146,7 +152,7 @@ def test_tracking_options_single_equals_batched(kw):
 
 
 def test_reference_state_starts_are_recorded_states_with_their_clock():
-    env = ConstrainedBipedEnv(start={"rsi": 1.0}, observation=["phase"])
+    env = ConstrainedBipedEnv(start="reference", observation=["phase"])
     ref = load_reference("midstride")
     rows = np.concatenate([ref.q, ref.qd], axis=1)
     for seed in range(20):
@@ -165,12 +171,17 @@ def test_reference_state_starts_are_recorded_states_with_their_clock():
             np.testing.assert_array_equal(_at_clock(env), rows[k])
 
 
-def test_rsi_fraction_and_rsi_off_keeps_the_envs_own_starts():
+def test_the_reference_components_weight_is_its_fraction_and_zero_keeps_the_own_starts():
+    assert split_reference((("reference", 0.5), ("rest", 0.25), ("midstride", 0.25))) == (
+        0.5, (("rest", 0.5), ("midstride", 0.5)))  # fmt: skip
+    assert split_reference((("reference", 0.3), ("stride", 0.7))) == (0.3, "stride")
+    assert split_reference("reference") == (1.0, None)
+    assert split_reference((("stride", 0.5), ("midstride", 0.5)))[0] == 0.0
     plain = ConstrainedBipedEnv()
-    off = ConstrainedBipedEnv(reward="tracking", start={"rsi": 0.0})
+    off = ConstrainedBipedEnv(reward="tracking", start={"reference": 0.0, "midstride": 1.0})
     for seed in range(5):
         np.testing.assert_array_equal(plain.reset(seed=seed)[0], off.reset(seed=seed)[0])
-    half = ConstrainedBipedEnv(start={"rsi": 0.5})
+    half = ConstrainedBipedEnv(start={"reference": 0.5, "midstride": 0.5})
     ref_q = load_reference("midstride").q
     on_ref = 0
     for seed in range(200):
@@ -224,9 +235,9 @@ def test_mixed_starts_follow_the_recording_of_their_own_kind():
         np.testing.assert_array_equal(_at_clock(env), ref.tables[(1, info["mode"])][0, :12])
     assert seen == {"rest", "midstride"}
     venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
-                        start={"kind": "mixed", "rsi": 0.5}, reward="tracking",
+                        start=MIXED_AND_REFERENCE, reward="tracking",
                         observation=["phase"])  # fmt: skip
-    envs = [gym.make("ConstrainedBiped-v0", start={"kind": "mixed", "rsi": 0.5},
+    envs = [gym.make("ConstrainedBiped-v0", start=MIXED_AND_REFERENCE,
                      reward="tracking", observation=["phase"]) for _ in range(4)]  # fmt: skip
     vo, _ = venv.reset(seed=3)
     np.testing.assert_array_equal(vo, [e.reset(seed=3 + i)[0] for i, e in enumerate(envs)])
@@ -234,7 +245,7 @@ def test_mixed_starts_follow_the_recording_of_their_own_kind():
 
 def test_default_env_is_unchanged_by_the_tracking_options_defaults():
     a = ConstrainedBipedEnv()
-    b = ConstrainedBipedEnv(reward="env", action="torque", start={"rsi": 0.0})
+    b = ConstrainedBipedEnv(reward="env", action="torque", start="midstride")
     assert a.core.tracking is None and a.core.clock is None
     oa, _ = a.reset(seed=4)
     ob, _ = b.reset(seed=4)
@@ -248,7 +259,9 @@ def test_default_env_is_unchanged_by_the_tracking_options_defaults():
 
 @pytest.mark.parametrize(
     "kw, name",
-    [({"reward": "imitate"}, "reward"), ({"start": {"rsi": 1.5}}, "rsi"),
+    [({"reward": "imitate"}, "reward"),
+     ({"start": {"reference": -0.5, "midstride": 1.0}}, "'reference'"),
+     ({"start": {"rsi": 0.5}}, "'reference': 0.5"),
      ({"action": "pos"}, "action"),
      ({"action": {"kind": "pd", "around": "teacher"}}, "around"),
      ({"action": {"kind": "pd", "range": 0.0}}, "range"),
@@ -269,8 +282,8 @@ def test_the_reference_clock_counts_its_own_periods_at_any_control_period():
     """At dt = 20 ms the clock's j periods are 4 j of the 5 ms reference's rows."""
     import gymnasium as gym
 
-    fine = gym.make("ConstrainedBiped-v0", task="track", start={"rsi": 0.0}).unwrapped
-    coarse = gym.make("ConstrainedBiped-v0", task="track", start={"rsi": 0.0}, dt=0.02).unwrapped
+    fine = gym.make("ConstrainedBiped-v0", task="track", start="midstride").unwrapped
+    coarse = gym.make("ConstrainedBiped-v0", task="track", start="midstride", dt=0.02).unwrapped
     for env in (fine, coarse):
         env.reset(seed=0)
     tf, tc = fine.core.tracking, coarse.core.tracking

@@ -205,7 +205,9 @@ def test_a_second_stage_starts_from_a_policys_published_snapshot(tmp_path):
         train_ppo.main([*flags, "--out-dir", str(tmp_path / "b"), "--init-from", str(bad)])
 
 
-def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, monkeypatch):
+def test_tracking_config_trains_evaluates_without_reference_starts_and_compares(
+    tmp_path, monkeypatch
+):
     """The from-scratch recipe's pipeline: PD targets, tracking reward, reference starts in
     training only; evaluate and compare_runs rebuild the run-time env from the config."""
     from training.evaluation import compare as compare_runs
@@ -218,7 +220,7 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     small += ["--out-dir", str(tmp_path)]
     config = "training/configs/ppo_from_scratch.toml"
     assert train_ppo.main(["--config", config, *small]) == 0
-    relu = ["--seed", "1", "--train-env", "start={rsi = 0}", "--activation", "relu"]
+    relu = ["--seed", "1", "--train-env", 'start="midstride"', "--activation", "relu"]
     assert train_ppo.main(["--config", config, *small, *relu]) == 0
     with pytest.raises(SystemExit, match="activation"):
         train_ppo.main(["--config", config, *small, "--activation", "sigmoid"])
@@ -228,9 +230,10 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     from biped_constraint_env.settings import make_settings
 
     train = make_settings(**cfg.train_env_kwargs())
-    assert s.action.pd and s.reward.kind == "tracking" and train.start.rsi == 0.5
-    assert cfg.env_kwargs()["start"]["rsi"] == 0.0 and s.start.rsi == 0.0  # task "track"
-    assert s.action.offset[1][0] > 0 and read_config(run1).train_env == {"start": {"rsi": 0}}
+    assert s.action.pd and s.reward.kind == "tracking" and train.start.reference_fraction == 0.5
+    assert cfg.env_kwargs()["start"]["kind"] == "midstride"  # task "track" less its references
+    assert s.start.reference_fraction == 0.0
+    assert s.action.offset[1][0] > 0 and read_config(run1).train_env == {"start": "midstride"}
     kinds = [{type(m).__name__ for m in load_policy(r)[0].modules()} for r in (run0, run1)]
     assert "Tanh" in kinds[0] and "ReLU" not in kinds[0] and "ReLU" in kinds[1]
     seen = []
@@ -248,9 +251,10 @@ def test_tracking_config_trains_evaluates_without_rsi_and_compares(tmp_path, mon
     assert (tmp_path / "curves.png").stat().st_size > 0
     rows = json.loads(out.read_text())["rows"]
     assert [r["training_seed"] for r in rows] == [0, 1]
-    assert rows[1]["changes"] == "train_env.start={'rsi': 0}, activation='relu'"
+    assert rows[1]["changes"] == "train_env.start='midstride', activation='relu'"
     assert "PD" in rows[0]["in_the_loop"]
-    assert all(kw["task"] == "track" and kw["start"]["rsi"] == 0.0 for kw in seen)
+    assert all(kw["task"] == "track" for kw in seen)
+    assert all(make_settings(**kw).start.start == "midstride" for kw in seen)  # no references
 
 
 @pytest.mark.parametrize(

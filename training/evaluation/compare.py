@@ -45,7 +45,7 @@ IGNORED = {"seed", "out_dir", "resume", "progress", "total_timesteps"}
 def differences(cfg, base) -> str:
     """The config fields where ``cfg`` differs from ``base`` (``name=value``, comma-separated).
 
-    A table's entries are compared one by one (``train_env.start={rsi = 0}``).
+    A table's entries are compared one by one (``train_env.start={kind = "mixed"}``).
     """
 
     def flat(c) -> dict:

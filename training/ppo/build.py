@@ -51,10 +51,10 @@ def training_env(
 ):
     """The training env of a config: (VecMonitor of the SB3 VecEnv, VecNormalize over it).
 
-    The config's training env options (with ``rsi``), its time limit and action map;
-    ``env_threads`` overrides
-    ``cfg.env_threads``. With a teacher the policy normalises its observations itself (fixed
-    statistics), so VecNormalize normalises only the returns.
+    The config's training env options (with its reference-state starts), its time limit and
+    action map; ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy
+    normalises its observations itself (fixed statistics), so VecNormalize normalises only the
+    returns.
     """
     from stable_baselines3.common.vec_env import VecNormalize
 

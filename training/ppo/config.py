@@ -149,12 +149,9 @@ class PPOConfig:
                 raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES} "
                                  f"or {OWN_REFERENCE!r}, "
                                  f"got {ref!r}")  # fmt: skip
-        for name, kwargs in (
-            ("env", self.env_kwargs()),
-            ("train_env", self.train_env_kwargs()),
-        ):
+        for name, kwargs in (("env", self.env_kwargs), ("train_env", self.train_env_kwargs)):
             try:
-                make_settings(**kwargs)
+                make_settings(**kwargs())
             except (ValueError, TypeError) as e:
                 raise ValueError(f"[{name}]: {e}") from None
 
@@ -194,9 +191,17 @@ class PPOConfig:
     def env_kwargs(self) -> dict:
         """Keyword arguments of the env the policy runs in: ``[env]``, with its own starts.
 
-        ``rsi`` is 0: a task's reference-state starts are for training.
+        Without the ``"reference"`` start component (reference states are for training): the
+        start's other components, or mid-stride where it has none.
         """
-        return with_keys(self.env, "start", rsi=0.0)
+        from biped_constraint_env.settings import make_settings
+        from biped_constraint_env.starts import split_reference, start_name
+
+        start = make_settings(**self.env).start.start
+        weight, own = split_reference(start)
+        if weight == 0:
+            return dict(self.env)
+        return with_keys(self.env, "start", kind=start_name(own or "midstride"))
 
     def train_env_kwargs(self) -> dict:
         """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top."""
