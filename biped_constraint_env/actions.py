@@ -7,6 +7,10 @@
   decides every ``dt``, the joint servo runs every ``pd_dt``), in compiled code
   (:func:`nb_pd_torques`, called by the control period). ``pd_dt = dt`` holds the PD torque
   over the period (the law of earlier versions of the env).
+
+Each mapping is one class of :data:`ACTION_MAPPINGS` (its kind read in this file only): a
+mapping computed in Python is a before-period hook (tests/test_parts.py adds one); one at the
+physics rate is a kind code of the compiled period and its kernel (:mod:`.period`).
 """
 
 from __future__ import annotations
@@ -181,7 +185,6 @@ PD_OFFSET_MAX_RAD = 1.0
 PD_GAIN_SCALE_MAX = 100.0
 PD_FIXED_POSE_RAD = (-0.1, 0.1, -0.3, -0.4, 0.7)
 """The default ``action["pose"]`` of ``around="fixed"``: q1..q5 of the Fig. 2 rest posture."""
-ACTION_KINDS = ("torque", "pd")
 PD_AROUND = ("fixed", "reference")
 PD_KEYS = ("kind", "around", "range", "pose", "offset", "gain_scale", "dt")
 """The ``action`` dict's PD keys (all but ``kind`` are the PD mapping's)."""
@@ -217,7 +220,7 @@ class ActionSettings:
     @property
     def unit_actions(self) -> bool:
         """Whether an action is a point of [-1, 1]^5 that the env maps (PD targets)."""
-        return self.pd
+        return ACTION_MAPPINGS[self.kind].unit_actions
 
     @property
     def needs_reference(self) -> bool:
@@ -234,13 +237,7 @@ class ActionSettings:
 
     def in_the_loop(self) -> str:
         """What acts at run time with this mapping, after the network."""
-        if self.needs_reference:
-            return "network + PD about the reference pose at the contact clock"
-        return (
-            "network alone (PD targets about a fixed pose)"
-            if self.pd
-            else "network alone (torques)"
-        )
+        return ACTION_MAPPINGS[self.kind].in_the_loop(self)
 
     @property
     def offset_by_model(self) -> bool:
@@ -249,13 +246,13 @@ class ActionSettings:
 
     @property
     def bound(self) -> float:
-        """The action space's bound: 1 for PD targets, the torque limit for torques."""
-        return 1.0 if self.pd else self.torque_limit_nm
+        """The action space's bound: 1 for unit actions (PD targets), else the torque limit."""
+        return 1.0 if self.unit_actions else self.torque_limit_nm
 
     @property
     def bound_name(self) -> str:
         """The bound's name in error messages."""
-        return PD_BOUND if self.pd else "torque limit"
+        return ACTION_MAPPINGS[self.kind].bound_name
 
     @property
     def kp(self) -> np.ndarray:
@@ -276,15 +273,16 @@ def action_settings(spec: Any, task_spec: Any, dt: float) -> ActionSettings:
 
     task = as_dict(task_spec)
     given = {} if spec is None else as_dict(spec)
-    kind = check_choice("action kind", given.get("kind", task.get("kind", "torque")), ACTION_KINDS)
+    kind = check_choice("action kind", given.get("kind", task.get("kind", "torque")),
+                        tuple(ACTION_MAPPINGS))  # fmt: skip
     merged = {**(task if task.get("kind", "torque") == kind else {}), **given, "kind": kind}
     limit, out_of_range = check_action_settings(merged.get("torque_limit_nm", TORQUE_LIMIT_NM),
                                                 merged.get("out_of_range", "clip"))  # fmt: skip
-    if kind == "torque":
+    if kind != "pd":
         extra = sorted(set(given) - {"kind", "torque_limit_nm", "out_of_range"})
         if extra:
-            raise ValueError(f"action: {extra} are PD settings; torque actions take none")
-        return ActionSettings("torque", limit, out_of_range)
+            raise ValueError(f"action: {extra} are PD settings; {kind} actions take none")
+        return ActionSettings(kind, limit, out_of_range)
     pose = merged.get("pose")
     offset = merged.get("offset")
     scale = check_real("action gain_scale", merged.get("gain_scale", 1.0), 0.0,
@@ -326,24 +324,72 @@ def _offsets(offset: Any) -> tuple[tuple[float, ...], ...]:
 
 
 # ----------------------------------------------------------------------------- the part
-class ActionPart:
-    """The action mapping of N rows in the core (its kind read here only).
+class TorqueActions:
+    """``action="torque"``: the actions are the torques [N m] (the compiled period's kind 0).
 
-    The compiled period's config, and for PD targets their bases (set once about a fixed
-    pose, or before every period about the reference at the clock), ``info["torque"]`` and
-    a cleared action at reset.
-
-    ``reference``: the rows' reference lookup (:class:`~.tracking.Tracking`: ``rows()``, the
-    reference at each row's clock), needed only about the reference.
+    An action mapping is one class of :data:`ACTION_MAPPINGS`: what it is to a user
+    (``unit_actions``: a point of [-1, 1]^5; ``bound_name``; :meth:`in_the_loop`) and, per
+    env, its part: ``pcfg`` (the compiled period's kind code and PD law:
+    :func:`pd_config`), ``check_bound`` (the bound the compiled period checks ``act``
+    against), ``info_keys``, :meth:`hooks` (what runs before a period: the actions to what
+    ``act`` holds), :meth:`info` and :meth:`clear`. A mapping computed in Python is a hook; a
+    mapping at the physics rate is a kind code and its kernel (:mod:`.period`).
     """
+
+    unit_actions = False
+    bound_name = "torque limit"
+
+    def __init__(self, action: ActionSettings, n: int, reference=None):
+        """For the validated ``action`` and ``n`` rows (``reference``: unused)."""
+        self.action = action
+        self.pcfg = TORQUE_ACTIONS
+        self.check_bound, self.check_name = action.torque_limit_nm, self.bound_name
+        self.info_keys: tuple[str, ...] = ()
+
+    @staticmethod
+    def in_the_loop(action: ActionSettings) -> str:
+        """What acts at run time with this mapping, after the network."""
+        return "network alone (torques)"
+
+    def hooks(self, buf, sim_modes) -> list:
+        """Before-period hooks fn(actions, rngs, rows) -> actions: none."""
+        return []
+
+    def info(self, buf, row):
+        """``info`` values of :attr:`info_keys`: none."""
+        return ()
+
+    def clear(self, buf) -> None:
+        """After a reset: nothing to clear."""
+
+
+class PDTargets(TorqueActions):
+    """``action="pd"``: PD targets in [-1, 1]^5 about a base (the compiled period's PD kind).
+
+    The compiled period's config, the targets' bases (set once about a fixed pose, or before
+    every period about the reference at the clock), ``info["torque"]`` and a cleared action
+    at reset. ``reference``: the rows' reference lookup (:class:`~.tracking.Tracking`:
+    ``rows()``, the reference at each row's clock), needed only about the reference.
+    """
+
+    unit_actions = True
+    bound_name = PD_BOUND
 
     def __init__(self, action: ActionSettings, n: int, reference=None):
         """For the validated ``action`` and ``n`` rows."""
         self.action, self.reference = action, reference
         self._offset = np.array(action.offset, dtype=np.float64)  # (4, 5), by model
-        self.pcfg = (pd_config(action.pd_substeps, action.torque_limit_nm, action.range,
-                               action.kp, action.kd) if action.pd else TORQUE_ACTIONS)  # fmt: skip
-        self.info_keys = ("torque",) if action.pd else ()
+        self.pcfg = pd_config(action.pd_substeps, action.torque_limit_nm, action.range,
+                              action.kp, action.kd)  # fmt: skip
+        self.check_bound, self.check_name = 1.0, self.bound_name
+        self.info_keys = ("torque",)
+
+    @staticmethod
+    def in_the_loop(action: ActionSettings) -> str:
+        """What acts at run time with this mapping, after the network."""
+        if action.needs_reference:
+            return "network + PD about the reference pose at the contact clock"
+        return "network alone (PD targets about a fixed pose)"
 
     def bases(self, modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 5) bases of the PD targets [rad] and their rates [rad/s] of rows in ``modes``.
@@ -360,8 +406,6 @@ class ActionPart:
 
     def hooks(self, buf, sim_modes) -> list:
         """Before-period hooks: the bases where they vary (set once here where they do not)."""
-        if not self.action.pd:
-            return []
         if not self.action.bases_vary:  # constant bases about a fixed pose: set once
             buf.tgt[:], buf.rate[:] = self.bases(np.ones(buf.tgt.shape[0], np.int64))
             return []
@@ -378,5 +422,14 @@ class ActionPart:
 
     def clear(self, buf) -> None:
         """After a reset: no torque of a period yet (PD targets' ``info["torque"]``)."""
-        if self.action.pd:
-            buf.act[:] = 0.0
+        buf.act[:] = 0.0
+
+
+ACTION_MAPPINGS: dict[str, type[TorqueActions]] = {"torque": TorqueActions, "pd": PDTargets}
+"""The action mappings by kind (``action=`` names one): a new mapping is one entry here (and,
+at the physics rate, its kernel in :mod:`.period`)."""
+
+
+def action_part(action: ActionSettings, n: int, reference=None) -> TorqueActions:
+    """The part of ``n`` rows for the validated ``action`` (the kind read here only)."""
+    return ACTION_MAPPINGS[action.kind](action, n, reference)

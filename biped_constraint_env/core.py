@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .actions import ActionPart, action_config, validate_actions
+from .actions import action_config, action_part, validate_actions
 from .clock import ContactClock
 from .command import CommandReward, Commands
 from .gait import GaitReward
@@ -104,14 +104,14 @@ class EnvCore:
         self.observation_space = observation_space(s.observation.blocks)
         self.clock = ContactClock(n, p.dt) if s.needs_clock else None
         self.tracking = Tracking(n, s, self.clock) if s.needs_reference else None
-        self.action_part = ActionPart(a, n, self.tracking)
+        self.action_part = action_part(a, n, self.tracking)
         env_weights = (s.reward.weights if s.reward.kind == "env"
                        else tuple(t.weight for t in REWARD_KINDS["env"]))  # fmt: skip
         self.buf = EnvBuffers(
             n, p.params, p.options, p.dt,
             reward_config(env_weights, a.torque_limit_nm, s.fall_hip_height_m,
                           s.reward.kind == "env"),
-            action_config(a.bound, a.out_of_range), num_threads,
+            action_config(self.action_part.check_bound, a.out_of_range), num_threads,
             pcfg=self.action_part.pcfg,
         )  # fmt: skip
         self.sim, self.hip = self.buf.sim, self.buf.hip
@@ -283,11 +283,13 @@ class EnvCore:
 
     def _run(self, actions: np.ndarray, skip) -> None:
         """The compiled period of every row but ``skip``, then the contact clock."""
-        buf, sim, a = self.buf, self.sim, self.settings.action
+        buf, sim = self.buf, self.sim
         if skip is not None:
             sim.status[skip] = NOT_STEPPED
-        if buf.period():
-            validate_actions(actions, a.bound, a.out_of_range, a.bound_name)
+        if buf.period():  # refused: the check of what ``act`` holds raises its ValueError
+            part = self.action_part
+            validate_actions(actions, part.check_bound, self.settings.action.out_of_range,
+                             part.check_name)  # fmt: skip
             raise AssertionError(f"the compiled action check refused {actions}, Python not")
         stepped = None
         if skip is not None:

@@ -1,4 +1,5 @@
-"""A new start component, termination or observation block is one entry in its part's file.
+"""A new start component, termination, observation block or action mapping is one entry in its
+part's file.
 
 Each test adds one (monkeypatched into the registry, as a user's own module would) and runs it
 in the single and the batched env, which agree row for row.
@@ -9,8 +10,9 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from biped_constraint_env import observation, starts, terminations
+from biped_constraint_env import actions, observation, starts, terminations
 from biped_constraint_env.modes import Mode
+from training.controller.model_controller import controller_from
 
 
 def _single_and_batched(kw, steps=5, n=3, action=None):
@@ -49,6 +51,39 @@ def test_a_new_start_component_is_one_entry(monkeypatch):
     seen = {gym.make("ConstrainedBiped-v0", **mixed).unwrapped.reset(seed=s)[1]["mode"]
             for s in range(20)}  # fmt: skip
     assert seen == {1, 2}
+
+
+def test_a_new_action_mapping_is_one_entry(monkeypatch):
+    class UnitTorque(actions.TorqueActions):  # actions in [-1, 1]^5, a fraction of the limit
+        unit_actions = True
+        bound_name = "unit bound"
+
+        @staticmethod
+        def in_the_loop(action):
+            return "network alone (torques as fractions of the limit)"
+
+        def hooks(self, buf, sim_modes):  # computed in Python: no kernel of its own
+            return [lambda a, rngs, rows: a * self.action.torque_limit_nm]
+
+    monkeypatch.setitem(actions.ACTION_MAPPINGS, "unit_torque", UnitTorque)
+    env = gym.make("ConstrainedBiped-v0", action="unit_torque")
+    assert env.action_space.high.tolist() == [1.0] * 5
+    assert env.unwrapped.settings.action.in_the_loop().endswith("of the limit)")
+    plain = gym.make("ConstrainedBiped-v0")
+    walk = controller_from("model:teacher_robust")  # torques [N m] that walk
+    obs, _ = plain.reset(seed=3)
+    np.testing.assert_array_equal(env.reset(seed=3)[0], obs)
+    for _ in range(100):  # the same walk as the torques it maps to
+        u = walk(obs) / 150.0
+        a, b = env.step(u), plain.step(u * 150.0)
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:4] == b[1:4] and not (b[2] or b[3]) and a[4]["t"] == b[4]["t"]
+        obs = b[0]
+    assert b[4]["steps_completed"] >= 1
+    u = np.array([0.02, -0.01, 0.015, 0.0, -0.005])
+    _single_and_batched({"action": "unit_torque"}, action=u)
+    with pytest.raises(ValueError, match="PD settings; unit_torque actions take none"):
+        gym.make("ConstrainedBiped-v0", action={"kind": "unit_torque", "range": 0.5})
 
 
 def test_a_new_termination_is_one_entry(monkeypatch):
