@@ -43,6 +43,9 @@ STAND_TOE_Y_RANGE_M = (-1.15, -0.85)
 """Range of the rear toe's position at a standing start, from the front toe [m]."""
 STAND_HEEL_UP_RANGE_RAD = (0.05, 0.2)
 """Range of the rear foot's heel-up angle at a standing start [rad]."""
+NUDGE_RATE_RANGE_RAD_S = (-0.6, 0.0)
+"""Range of the stance leg's turning rate about the ankle at a nudge start [rad/s] (< 0:
+forward; the flat-foot stride start's fastest to the rest start's zero)."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 MAX_RESET_NOISE_RAD = 1.0
@@ -237,7 +240,20 @@ def _stand(rng, posture, params):
     return q, np.zeros(N_LINKS), _DOUBLE_SUPPORT
 
 
-START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride, "stand": _stand}
+def _nudge(rng, posture, params):
+    """The ``posture`` in model 1, the stance leg turning forward about the ankle.
+
+    Its rate drawn uniformly from :data:`NUDGE_RATE_RANGE_RAD_S` (0: the rest start), the swing
+    thigh keeping its direction: the states between the rest start and walking.
+    """
+    rate = _uniform(rng, *NUDGE_RATE_RANGE_RAD_S)
+    qd = np.zeros(N_LINKS)
+    qd[1], qd[3] = rate, -rate
+    return np.array(posture, dtype=np.float64), qd, _FOOT_FLAT
+
+
+START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride, "stand": _stand,
+                    "nudge": _nudge}  # fmt: skip
 """The start components by name: each draws (q, qd, mode) from a row's generator, the rest
 posture and the robot, before the reset noise. A new start is one entry here (``start`` or a
 mixture ``start={"stride": 0.75, "midstride": 0.25}`` names it)."""

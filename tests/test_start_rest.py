@@ -103,6 +103,29 @@ def _first_step(ctl, env_kw, seed=0, limit_s=5.0):
     return info, phases
 
 
+def test_nudge_start_is_the_rest_posture_turning_forward_in_both_envs():
+    """``start="nudge"``: model 1, the rest posture (with the reset noise), the stance leg
+    turning forward about the ankle at a drawn rate in the range, the swing thigh keeping its
+    direction; single = batched."""
+    from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, NUDGE_RATE_RANGE_RAD_S
+
+    env = gym.make("ConstrainedBiped-v0", start="nudge", dt=0.02).unwrapped
+    venv = gym.make_vec("ConstrainedBiped-v0", 8, vectorization_mode="vector_entry_point",
+                        start="nudge", dt=0.02)  # fmt: skip
+    vo, _ = venv.reset(seed=11)
+    lo, hi = NUDGE_RATE_RANGE_RAD_S
+    rates = []
+    for i in range(8):
+        o, info = env.reset(seed=11 + i)
+        np.testing.assert_array_equal(o, vo[i])
+        st = env.state
+        assert info["mode"] == 1 and st.qd[0] == 0.0 and st.qd[1] == -st.qd[3]
+        assert np.all(st.qd[[2, 4, 5]] == 0.0) and lo <= st.qd[1] <= hi
+        np.testing.assert_allclose(st.q, NOMINAL_POSTURE_RAD, atol=0.0101)
+        rates.append(st.qd[1])
+    assert len(set(rates)) == 8 and min(rates) < -0.1
+
+
 def test_teacher_completes_its_first_step_from_rest_in_its_start_phase():
     ctl = controller_from(TEACHER)
     info, phases = _first_step(ctl, {"start": "rest"})
