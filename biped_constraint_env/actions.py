@@ -343,7 +343,7 @@ class TorqueActions:
         """For the validated ``action`` and ``n`` rows (``reference``: unused)."""
         self.action = action
         self.pcfg = TORQUE_ACTIONS
-        self.check_bound, self.check_name = action.torque_limit_nm, self.bound_name
+        self.check_bound = action.torque_limit_nm
         self.info_keys: tuple[str, ...] = ()
 
     @staticmethod
@@ -381,7 +381,7 @@ class PDTargets(TorqueActions):
         self._offset = np.array(action.offset, dtype=np.float64)  # (4, 5), by model
         self.pcfg = pd_config(action.pd_substeps, action.torque_limit_nm, action.range,
                               action.kp, action.kd)  # fmt: skip
-        self.check_bound, self.check_name = 1.0, self.bound_name
+        self.check_bound = 1.0
         self.info_keys = ("torque",)
 
     @staticmethod

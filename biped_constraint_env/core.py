@@ -289,7 +289,7 @@ class EnvCore:
         if buf.period():  # refused: the check of what ``act`` holds raises its ValueError
             part = self.action_part
             validate_actions(actions, part.check_bound, self.settings.action.out_of_range,
-                             part.check_name)  # fmt: skip
+                             part.bound_name)  # fmt: skip
             raise AssertionError(f"the compiled action check refused {actions}, Python not")
         stepped = None
         if skip is not None:
