@@ -43,9 +43,11 @@ STAND_TOE_Y_RANGE_M = (-1.15, -0.85)
 """Range of the rear toe's position at a standing start, from the front toe [m]."""
 STAND_HEEL_UP_RANGE_RAD = (0.05, 0.2)
 """Range of the rear foot's heel-up angle at a standing start [rad]."""
-NUDGE_RATE_RANGE_RAD_S = (-0.6, 0.0)
+NUDGE_RATE_RANGE_RAD_S = (-0.6, 0.2)
 """Range of the stance leg's turning rate about the ankle at a nudge start [rad/s] (< 0:
-forward; the flat-foot stride start's fastest to the rest start's zero)."""
+forward): from the flat-foot stride start's fastest to a slow turn backward, so that the rest
+start's zero lies inside the range (a policy trained on forward rates alone walks from any of
+them and still falls backward from rest: docs/recipes/ppo_gait_rest_50hz.md)."""
 RESET_NOISE_SCALE_RAD = 0.01
 """Default half-width of the uniform noise added to q1..q5 at reset [rad]."""
 MAX_RESET_NOISE_RAD = 1.0
@@ -241,10 +243,11 @@ def _stand(rng, posture, params):
 
 
 def _nudge(rng, posture, params):
-    """The ``posture`` in model 1, the stance leg turning forward about the ankle.
+    """The ``posture`` in model 1, the stance leg turning about the ankle.
 
-    Its rate drawn uniformly from :data:`NUDGE_RATE_RANGE_RAD_S` (0: the rest start), the swing
-    thigh keeping its direction: the states between the rest start and walking.
+    Its rate drawn uniformly from :data:`NUDGE_RATE_RANGE_RAD_S` (mostly forward, some
+    backward; 0: the rest start), the swing thigh keeping its direction: the states around the
+    rest start and between it and walking.
     """
     rate = _uniform(rng, *NUDGE_RATE_RANGE_RAD_S)
     qd = np.zeros(N_LINKS)

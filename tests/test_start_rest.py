@@ -103,10 +103,10 @@ def _first_step(ctl, env_kw, seed=0, limit_s=5.0):
     return info, phases
 
 
-def test_nudge_start_is_the_rest_posture_turning_forward_in_both_envs():
+def test_nudge_start_is_the_rest_posture_turning_in_both_envs():
     """``start="nudge"``: model 1, the rest posture (with the reset noise), the stance leg
-    turning forward about the ankle at a drawn rate in the range, the swing thigh keeping its
-    direction; single = batched."""
+    turning about the ankle at a drawn rate in the range, forward or backward (rest inside the
+    range), the swing thigh keeping its direction; single = batched."""
     from biped_constraint_env.starts import NOMINAL_POSTURE_RAD, NUDGE_RATE_RANGE_RAD_S
 
     env = gym.make("ConstrainedBiped-v0", start="nudge", dt=0.02).unwrapped
@@ -114,6 +114,7 @@ def test_nudge_start_is_the_rest_posture_turning_forward_in_both_envs():
                         start="nudge", dt=0.02)  # fmt: skip
     vo, _ = venv.reset(seed=11)
     lo, hi = NUDGE_RATE_RANGE_RAD_S
+    assert lo < 0.0 < hi  # rest (rate 0) lies inside the range
     rates = []
     for i in range(8):
         o, info = env.reset(seed=11 + i)
@@ -124,6 +125,8 @@ def test_nudge_start_is_the_rest_posture_turning_forward_in_both_envs():
         np.testing.assert_allclose(st.q, NOMINAL_POSTURE_RAD, atol=0.0101)
         rates.append(st.qd[1])
     assert len(set(rates)) == 8 and min(rates) < -0.1
+    more = [env.reset(seed=s)[0] for s in range(40)]  # backward ones too (hip moving back)
+    assert min(o[14] for o in more) < 0.0 < max(o[14] for o in more)
 
 
 def test_teacher_completes_its_first_step_from_rest_in_its_start_phase():
