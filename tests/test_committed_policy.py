@@ -164,6 +164,35 @@ def test_committed_level2_policy_walks_with_no_recorded_motion():
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
 
 
+def test_committed_gait_rest_policy_starts_from_rest_with_no_recorded_motion():
+    """policies/ppo_gait_rest_50hz: the network alone sets torques every 20 ms, trained by PPO
+    from a random network with the gait reward and the env's own starts around rest (nudge
+    starts with rates on both sides of zero); no option of its run-time or training env reads a
+    recorded walk, and ``evaluate`` loads its published snapshot. One held-out 30 s episode from
+    the paper's rest posture walks."""
+    import torch
+
+    from biped_constraint_env.settings import make_settings
+    from biped_constraint_env.starts import NUDGE_RATE_RANGE_RAD_S
+    from training.evaluation.rollouts import run_episodes
+    from training.ppo.policy_io import available, load_policy, policy_actor, published_snapshot
+
+    torch.set_num_threads(1)
+    path = POLICY.parent / "ppo_gait_rest_50hz"
+    assert published_snapshot(path)[0] == "best"
+    policy, norm, cfg, _ = load_policy(path)  # the published snapshot, as evaluate loads it
+    assert cfg.teacher == "" and cfg.base_controller == "" and not available(path, "imitation")
+    run, train = cfg.settings(), make_settings(**cfg.train_env_kwargs())
+    for s in (run, train):
+        assert s.reward.kind == "gait" and s.action.kind == "torque" and not s.needs_reference
+        assert s.dt == 0.02 and s.observation.phase_obs and s.physics.options.strict
+    assert run.start.start == "rest" and "nudge" in dict(train.start.start)
+    assert NUDGE_RATE_RANGE_RAD_S[0] < 0.0 < NUDGE_RATE_RANGE_RAD_S[1]
+    (ep,) = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), [0], cfg.env_id,
+                         episode_s=30)  # fmt: skip
+    assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
+
+
 def test_committed_rest_policy_is_the_network_alone_and_starts_from_rest():
     """policies/ppo_alone_rest_50hz (the network alone from rest): it sets torques every 20 ms,
     the clock but no reference in its input, trained by PPO from a random network from both
