@@ -28,10 +28,12 @@ from .validation import check_seeds
 class ConstrainedBipedEnv(gym.Env):
     r"""Planar six-link biped whose ground contact is a constraint (Maeba et al. 2013).
 
-    To learn with an off-the-shelf RL library, start from ``task="track"``: the default task
-    keeps the strict contact checks, on which random or zero torques end every episode in its
-    first control period (``ep_len_mean`` 1); ``task="track"`` is the task plain SB3 PPO learns
-    from a random network (docs/sb3.md), and ``training/configs/`` holds the recipes.
+    To learn with an off-the-shelf RL library, start from ``examples/train_sb3.py``
+    (docs/sb3.md): the default task keeps the strict contact checks, on which random or zero
+    torques end every episode in its first control period (``ep_len_mean`` 1); with 20 ms
+    torques, the gait reward (``reward={"kind": "gait", ...}``) and the env's stride starts,
+    plain SB3 PPO learns to walk from a random network with no recorded motion, and
+    ``training/configs/`` holds the recipes.
 
     ## Description
     The robot of the paper "Bipedal Locomotion Model Based on Constraint Condition by
