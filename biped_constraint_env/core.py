@@ -31,7 +31,7 @@ from .rewards import (
     TERMINATION_NON_FINITE,
     reward_config,
 )
-from .settings import EnvSettings
+from .settings import EnvSettings, with_start_kind
 from .simulator import SimState, evaluate
 from .starts import check_start_state, draw_starts
 from .state import (
@@ -169,6 +169,14 @@ class EnvCore:
         elif command is not None:
             raise ValueError("reset option 'command' needs an env with a command "
                              "(task='command' or the command option)")  # fmt: skip
+
+    def set_start_kind(self, start: str | dict) -> EnvSettings:
+        """Later starts of every row are drawn from ``start`` (:func:`~.settings.with_start_kind`).
+
+        The rows running now finish their episodes; returns the new settings.
+        """
+        self.settings = with_start_kind(self.settings, start)
+        return self.settings
 
     def set_starts(
         self, idx: np.ndarray, state: SimState, rngs, command: float | None = None

@@ -312,7 +312,8 @@ class ConstrainedBipedEnv(gym.Env):
       reference-state
       starts are the start mixture's ``"reference"`` component (``start={"kind": "mixed",
       "rsi": 0.5}`` is ``start={"reference": 0.5, "rest": 0.25, "midstride": 0.25}``, draw
-      for draw); ``rsi`` is refused naming it.
+      for draw); ``rsi`` is refused naming it. Added: ``set_start(start)`` in both envs (the
+      next episodes' start distribution, for a curriculum over starts).
 
     Example:
         >>> import gymnasium as gym
@@ -402,6 +403,16 @@ class ConstrainedBipedEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return core.first_observation(rngs), rewards.item(0), done, truncated, info
+
+    def set_start(self, start: str | dict) -> None:
+        """Draw the next episodes' starts from ``start``: a start's name or a mixture of weights.
+
+        As the ``start`` setting's ``kind`` (e.g. ``{"rest": 0.5, "stride": 0.5}``); the rest
+        posture and reset noise stay, and the episode in progress runs on. A training curriculum
+        over starts calls it (``training.ppo``'s ``start_curriculum``). ValueError on an unknown
+        start or a ``"reference"`` component the env was not made with.
+        """
+        self.settings = self.core.set_start_kind(start)
 
     def set_command(self, v: float) -> None:
         """Set the commanded forward speed [m/s], as a joystick would (``task="command"``).

@@ -37,6 +37,7 @@ from .rewards import RewardSettings, reward_settings
 from .starts import (
     NOMINAL_POSTURE_RAD,
     RESET_NOISE_SCALE_RAD,
+    check_start_kind,
     check_start_settings,
     split_reference,
     start_name,
@@ -314,6 +315,23 @@ def make_settings(
         termination=termination_settings(termination),
         command=commands,
     )
+
+
+def with_start_kind(settings: EnvSettings, start: str | dict) -> EnvSettings:
+    """``settings`` whose starts are drawn from ``start`` (a start's name or mixture of weights).
+
+    What an env's ``set_start`` validates: the rest posture and reset noise stay; a start that
+    changes whether the env reads the reference walk (a ``"reference"`` component where it had
+    none, or the reverse) is refused: the walk is loaded, or not, when the env is made.
+    """
+    kind = check_start_kind(start)
+    had = settings.start.reference_fraction > 0
+    if (split_reference(kind)[0] > 0) != had:
+        raise ValueError(
+            "set_start: the 'reference' start component is fixed when the env is made "
+            f"({'with' if had else 'without'} it here), got {start_name(kind)!r}"
+        )
+    return dataclasses.replace(settings, start=dataclasses.replace(settings.start, start=kind))
 
 
 RETIRED = {

@@ -104,6 +104,16 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self.core.draw_starts(idx, [self._rngs[i] for i in idx], command)
         self._elapsed[idx] = 0
 
+    def set_start(self, start: str | dict) -> None:
+        """Draw the next episodes' starts from ``start``: a start's name or a mixture of weights.
+
+        As the ``start`` setting's ``kind`` (e.g. ``{"rest": 0.5, "stride": 0.5}``); the rest
+        posture and reset noise stay, and the episode in progress runs on. A training curriculum
+        over starts calls it (``training.ppo``'s ``start_curriculum``). ValueError on an unknown
+        start or a ``"reference"`` component the env was not made with.
+        """
+        self.settings = self.core.set_start_kind(start)
+
     def set_command(self, values) -> None:
         """Set the commanded forward speeds [m/s]: one value for all rows or one per row.
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from biped_constraint_env.starts import start_name
 from training.evaluation.rollouts import run_episodes_batched
 from training.plumbing.outputs import OutDir
 from training.plumbing.safe_files import read_csv
@@ -87,6 +88,53 @@ def gamma_schedule(cfg: PPOConfig, vecnorm):
             self.logger.record("train/gamma", g)
 
     return GammaSchedule()
+
+
+def start_curriculum(cfg: PPOConfig, switched_at: int | None):
+    """A callback: the training starts of ``[start_curriculum]`` until the episodes last.
+
+    Training episodes start from its ``first`` start until the mean length of the last 100
+    training episodes (SB3's episode buffer) reaches ``until_episode_s``; from the next rollout
+    on, from ``[train_env]``'s start (the env's ``set_start``). ``switched_at``: the env step of
+    that switch in an earlier session of the run (a resume), else None. Its ``switched_at`` goes
+    into every checkpoint.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    c = cfg.start_curriculum
+    from biped_constraint_env.settings import make_settings
+
+    later = make_settings(**cfg.train_env_kwargs()).start.start
+    rows = [0] if cfg.vec == "batched" else None  # the batch: one env; SB3's: each env
+
+    class StartCurriculum(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.switched_at = switched_at
+
+        def _on_training_start(self) -> None:
+            if self.switched_at is None:
+                self.training_env.env_method("set_start", c["first"], indices=rows)
+                print(f"[starts] training episodes start from {c['first']} until they last "
+                      f"{c['until_episode_s']} s on average", flush=True)  # fmt: skip
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            buf = self.model.ep_info_buffer
+            if self.switched_at is not None or buf is None or len(buf) < buf.maxlen:
+                return
+            mean_s = float(np.mean([e["l"] for e in buf])) * cfg.settings().dt
+            self.logger.record("train/episode_s", mean_s)
+            if mean_s >= c["until_episode_s"]:
+                self.switched_at = int(self.model.num_timesteps)
+                self.training_env.env_method("set_start", start_name(later), indices=rows)
+                print(f"[starts] {self.switched_at} env steps: the last {buf.maxlen} training "
+                      f"episodes lasted {mean_s:.2f} s on average; training episodes now start "
+                      f"from {start_name(later)}", flush=True)  # fmt: skip
+
+    return StartCurriculum()
 
 
 def progress_bar(cfg: PPOConfig):
@@ -207,12 +255,14 @@ def truncate_eval_csv(run: OutDir, n: int) -> int:
 
 
 def make_callbacks(
-    cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float = 0.0, streak: int = 0
-):
+    cfg: PPOConfig, run: OutDir, vecnorm, best: float, wall0: float = 0.0, streak: int = 0,
+    more_state=dict,
+):  # fmt: skip
     """The run's evaluation, checkpoint and stop callback.
 
     ``best``: the best selection score so far; ``wall0``: the run's wall time before this
-    session [s]; ``streak``: the evaluations in a row that met the stop criterion.
+    session [s]; ``streak``: the evaluations in a row that met the stop criterion;
+    ``more_state()``: what else each checkpoint saves (the start curriculum's switch).
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -267,6 +317,7 @@ def make_callbacks(
                     "wall_s": time.time() - self.t0,
                     "stop_streak": self.streak,
                     "stopped": self.stopped,
+                    **more_state(),
                 },
                 vecnorm,
                 optimizer=True,

@@ -34,6 +34,10 @@ class PPOConfig:
     # flags: --env KEY=VALUE ... (TOML values) on top of the file's table
     train_env: dict = field(default_factory=dict)  # [train_env] table: what the training env
     # changes on top of [env] (reference-state starts, pushes, randomised models...)
+    start_curriculum: dict = field(default_factory=dict)  # [start_curriculum] table: training
+    # episodes start from `first` (a start's name or weights) until the mean length of the last
+    # 100 training episodes reaches `until_episode_s` [s], then from [train_env]'s start
+    # ({}: none; the switch is saved with the checkpoint)
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
@@ -149,11 +153,33 @@ class PPOConfig:
                 raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES} "
                                  f"or {OWN_REFERENCE!r}, "
                                  f"got {ref!r}")  # fmt: skip
+        self._check_start_curriculum()
         for name, kwargs in (("env", self.env_kwargs), ("train_env", self.train_env_kwargs)):
             try:
                 make_settings(**kwargs())
             except (ValueError, TypeError) as e:
                 raise ValueError(f"[{name}]: {e}") from None
+
+    def _check_start_curriculum(self) -> None:
+        """Refuse a ``[start_curriculum]`` with a wrong key or start, or a switch never reached."""
+        from biped_constraint_env.settings import make_settings, with_start_kind
+
+        c = self.start_curriculum
+        if not c:
+            return
+        if set(c) != {"first", "until_episode_s"}:
+            raise ValueError("[start_curriculum] takes first (a start) and until_episode_s [s], "
+                             f"got {sorted(c)}")  # fmt: skip
+        train = make_settings(**self.train_env_kwargs())
+        try:
+            with_start_kind(train, c["first"])
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"[start_curriculum] first: {e}") from None
+        longest = self.train_episode_s or train.time_limit_s
+        u = c["until_episode_s"]
+        if isinstance(u, bool) or not isinstance(u, int | float) or not 0 < u <= (longest or 1e4):
+            raise ValueError(f"[start_curriculum] until_episode_s must be in (0, {longest}] s "
+                             f"(a training episode lasts at most that), got {u!r}")  # fmt: skip
 
     def check_untrusted(self) -> None:
         """Refuse what a config from anywhere must not name (a loaded run's config.toml).

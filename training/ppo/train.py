@@ -47,6 +47,7 @@ from training.ppo.callbacks import (
     gamma_schedule,
     make_callbacks,
     progress_bar,
+    start_curriculum,
     stop_reason,
     truncate_eval_csv,
     update_threads,
@@ -210,7 +211,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         best = load_state(open_snapshot(run.path, "best")).get("score", -np.inf)
     demos = None
     resuming = checkpoint is not None
-    start, streak, stopped = 0, 0, False
+    start, streak, stopped, switched_at = 0, 0, False, None
     if resuming:
         n = cfg.obs_dim()
         model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
@@ -226,6 +227,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         if not isinstance(state.get("stopped", False), bool):
             raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: stopped must be a boolean")
         stopped = state.get("stopped", False) and not extend
+        switched_at = state.get("starts_switched_at")
+        if switched_at is not None and (type(switched_at) is not int or switched_at < 0):
+            raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: starts_switched_at must "
+                                     f"be an env step count or null")  # fmt: skip
         print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
     elif cfg.teacher and available(run.path, "imitation"):
         n = cfg.obs_dim()
@@ -277,7 +282,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         remaining = 0
     t0 = time.time()
     wall0 = load_state(checkpoint).get("wall_s", 0.0) if resuming else 0.0
-    callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak)
+    curriculum = start_curriculum(cfg, switched_at) if cfg.start_curriculum else None
+    more_state = (lambda: {"starts_switched_at": curriculum.switched_at}) if curriculum else dict
+    callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak,
+                              more_state)  # fmt: skip
     callback.stopped = stopped
     if remaining > 0:
         print(f"PPO: {remaining} env steps to go", flush=True)
@@ -289,6 +297,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                     critic_warmup(cfg, anchor),
                     update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
                     *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0 else []),
+                    *([curriculum] if curriculum else []),
                     *([progress_bar(cfg)] if cfg.progress else []),
                 ],
                 reset_num_timesteps=start == 0,
