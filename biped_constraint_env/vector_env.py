@@ -105,13 +105,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self._elapsed[idx] = 0
 
     def set_start(self, start: str | dict) -> None:
-        """Draw the next episodes' starts from ``start``: a start's name or a mixture of weights.
-
-        As the ``start`` setting's ``kind`` (e.g. ``{"rest": 0.5, "stride": 0.5}``); the rest
-        posture and reset noise stay, and the episode in progress runs on. A training curriculum
-        over starts calls it (``training.ppo``'s ``start_curriculum``). ValueError on an unknown
-        start or a ``"reference"`` component the env was not made with.
-        """
+        """Every row's next starts from ``start``, as :meth:`.ConstrainedBipedEnv.set_start`."""
         self.settings = self.core.set_start_kind(start)
 
     def set_command(self, values) -> None:

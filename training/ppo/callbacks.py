@@ -101,10 +101,11 @@ def start_curriculum(cfg: PPOConfig, switched_at: int | None):
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    c = cfg.start_curriculum
     from biped_constraint_env.settings import make_settings
 
-    later = make_settings(**cfg.train_env_kwargs()).start.start
+    c = cfg.start_curriculum
+    train = make_settings(**cfg.train_env_kwargs())
+    later, dt = start_name(train.start.start), train.dt
     rows = [0] if cfg.vec == "batched" else None  # the batch: one env; SB3's: each env
 
     class StartCurriculum(BaseCallback):
@@ -125,14 +126,14 @@ def start_curriculum(cfg: PPOConfig, switched_at: int | None):
             buf = self.model.ep_info_buffer
             if self.switched_at is not None or buf is None or len(buf) < buf.maxlen:
                 return
-            mean_s = float(np.mean([e["l"] for e in buf])) * cfg.settings().dt
+            mean_s = float(np.mean([e["l"] for e in buf])) * dt
             self.logger.record("train/episode_s", mean_s)
             if mean_s >= c["until_episode_s"]:
                 self.switched_at = int(self.model.num_timesteps)
-                self.training_env.env_method("set_start", start_name(later), indices=rows)
+                self.training_env.env_method("set_start", later, indices=rows)
                 print(f"[starts] {self.switched_at} env steps: the last {buf.maxlen} training "
                       f"episodes lasted {mean_s:.2f} s on average; training episodes now start "
-                      f"from {start_name(later)}", flush=True)  # fmt: skip
+                      f"from {later}", flush=True)  # fmt: skip
 
     return StartCurriculum()
 

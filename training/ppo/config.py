@@ -153,12 +153,12 @@ class PPOConfig:
                 raise ValueError(f"[{table}] reference must be a shipped name {REFERENCES} "
                                  f"or {OWN_REFERENCE!r}, "
                                  f"got {ref!r}")  # fmt: skip
-        self._check_start_curriculum()
         for name, kwargs in (("env", self.env_kwargs), ("train_env", self.train_env_kwargs)):
             try:
                 make_settings(**kwargs())
             except (ValueError, TypeError) as e:
                 raise ValueError(f"[{name}]: {e}") from None
+        self._check_start_curriculum()  # on the valid training env
 
     def _check_start_curriculum(self) -> None:
         """Refuse a ``[start_curriculum]`` with a wrong key or start, or a switch never reached."""
