@@ -167,7 +167,10 @@ def command_cadence_term(r, p) -> np.ndarray:
     stretch = np.where(moving, np.minimum(MAX_STRETCH, speed / np.where(moving, p.command, 1.0)),
                        1.0)  # fmt: skip
     stretch = np.maximum(stretch, 1.0)
-    over = np.maximum(p.model_time_s - r.cadence[p.modes] * stretch, 0.0)
+    target = r.cadence[p.modes] * stretch
+    if r.first_phase_s is not None and p.first_phase is not None:
+        target = np.where(p.first_phase, r.first_phase_s, target)
+    over = np.maximum(p.model_time_s - target, 0.0)
     return np.where(moving, kernel(r, "cadence", over), 1.0)
 
 

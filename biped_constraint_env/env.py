@@ -147,7 +147,11 @@ class ConstrainedBipedEnv(gym.Env):
     height [m] at the end of a period; off by default), and, only if
     ``termination["max_model_time_s"]`` is set, ``model_time`` (one contact phase held longer than
     that [s], by the contact clock: an early termination for learning, as legged-robot RL ends
-    episodes on a bad posture). A fall is one of these (a knee or the hip below the ground).
+    episodes on a bad posture), and, only if ``termination["max_first_phase_s"]`` is set,
+    ``first_phase_time`` (the first contact phase of a start near rest, model 1 with every joint
+    rate at most 0.6 rad/s, held longer than that [s]; ``max_model_time_s`` then applies from
+    the first model switch on).
+    A fall is one of these (a knee or the hip below the ground).
     ### Truncation
     By simulated time: ``termination["time_limit_s"]`` (default 30 s; None: none), the first
     period that ends at or after it (the single and the batched env alike, at any control period,
@@ -186,9 +190,12 @@ class ConstrainedBipedEnv(gym.Env):
     | | | "midstride", "stride", "stand", "reference" (recorded reference states) |
     | reward | "env" | "env" (Rewards), "tracking" (a reference walk's; below), "gait" (the task |
     | | | and the contact clock, no recording; below), "command", or {"kind", "weights", |
-    | | | "kernels", "targets", "gated"}: any term's weight, kernel or target (:mod:`.rewards`) |
+    | | | "kernels", "targets", "gated", "first_phase_s"}: any term's weight, kernel or |
+    | | | target; the cadence target of a start near rest's first contact phase [s] |
+    | | | (:mod:`.rewards`) |
     | termination | {} | dict: "fall_hip_height_m" (None: end when the hip is below [m]), |
     | | | "max_model_time_s" (None: end when one model has lasted longer [s]), |
+    | | | "max_first_phase_s" (None: end when a start near rest's first model lasts longer [s]), |
     | | | "time_limit_s" (30: truncation by simulated time [s]; None: none) |
     | observation | [] | blocks appended to the 24 entries: ["phase"] (the contact clock, below) |
     | perturbations | None | dict: pushes, model error, slopes, sensor noise, action delay |
@@ -227,7 +234,8 @@ class ConstrainedBipedEnv(gym.Env):
     ``reward="gait"`` (:mod:`.gait`) needs no recorded motion: kernels of the period's hip speed
     against a commanded speed, of the hip height, of the swing ankle's forward speed while the
     swing leg is free (periodic foot speed), and of the time held in the current model (the
-    contact clock), plus 1 per completed step; each target is a setting
+    contact clock), plus 1 per completed step and 0 per forward model switch (the ``switch``
+    weight: the step's reward paid in quarters); each target is a setting
     (``reward={"kind": "gait", "targets": {"speed": 0.8}}``).
 
     ## Info
@@ -313,7 +321,13 @@ class ConstrainedBipedEnv(gym.Env):
       starts are the start mixture's ``"reference"`` component (``start={"kind": "mixed",
       "rsi": 0.5}`` is ``start={"reference": 0.5, "rest": 0.25, "midstride": 0.25}``, draw
       for draw); ``rsi`` is refused naming it. Added: ``set_start(start)`` in both envs (the
-      next episodes' start distribution, for a curriculum over starts).
+      next episodes' start distribution, for a curriculum over starts). Added: the first
+      contact phase of a start near rest (model 1, every joint rate at most 0.6 rad/s) as a
+      phase of its own:
+      ``termination["max_first_phase_s"]`` (reason ``first_phase_time``) and the gait and
+      command rewards' ``first_phase_s`` (its cadence target), for a start from rest whose
+      sway before the first step is longer than a walking phase; the gait reward's
+      ``switch`` term (a weight per forward model switch, 0 by default; ``info["reward_switch"]``).
 
     Example:
         >>> import gymnasium as gym

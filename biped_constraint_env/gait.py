@@ -42,7 +42,9 @@ class Period:
     the swing ankle's forward speed [m/s]; ``modes``: the models after it; ``model_time_s``: the
     time since the current model began [s]; ``steps``: steps completed in it; ``command``: the
     commanded speeds [m/s] it ran under (None: the gait reward's constant target);
-    ``tau_sq``: sum(tau^2) of the period's torques [N^2 m^2] (its time mean where they vary).
+    ``tau_sq``: sum(tau^2) of the period's torques [N^2 m^2] (its time mean where they vary);
+    ``first_phase``: the rows still in a start near rest's first contact phase (None: none);
+    ``switches``: forward model switches in it (None: not recorded).
     """
 
     speed: np.ndarray
@@ -53,6 +55,8 @@ class Period:
     steps: np.ndarray
     command: np.ndarray | None = None
     tau_sq: np.ndarray | None = None
+    first_phase: np.ndarray | None = None
+    switches: np.ndarray | None = None
 
 
 def kernel(reward, name: str, error) -> np.ndarray:
@@ -81,14 +85,31 @@ def swing_term(r, p: Period) -> np.ndarray:
     return np.where(np.isin(p.modes, SWING_MODELS), kernel(r, "swing", short), 1.0)
 
 
+def cadence_targets(r, p: Period) -> np.ndarray:
+    """Each row's cadence target [s].
+
+    Its model's, or in a start near rest's first contact phase the reward's ``first_phase_s`` where
+    it is set.
+    """
+    target = r.cadence[p.modes]
+    if r.first_phase_s is None or p.first_phase is None:
+        return target
+    return np.where(p.first_phase, r.first_phase_s, target)
+
+
 def cadence_term(r, p: Period) -> np.ndarray:
-    """The time held in the current model against its model's target (the contact clock)."""
-    return kernel(r, "cadence", np.maximum(p.model_time_s - r.cadence[p.modes], 0.0))
+    """The time held in the current model against its target (the contact clock)."""
+    return kernel(r, "cadence", np.maximum(p.model_time_s - cadence_targets(r, p), 0.0))
 
 
 def steps_term(r, p: Period) -> np.ndarray:
     """The steps completed in the period."""
     return p.steps
+
+
+def switches_term(r, p: Period) -> np.ndarray:
+    """The forward model switches in the period (four per step; zeros where not recorded)."""
+    return np.zeros_like(p.steps) if p.switches is None else p.switches
 
 
 REWARD_KINDS["gait"] = (
@@ -104,6 +125,8 @@ REWARD_KINDS["gait"] = (
                    "value or one per model (1-4)"),
     RewardTerm("step", 1.0, value=steps_term, per_period=False,
                doc="weight per completed walking step"),
+    RewardTerm("switch", 0.0, value=switches_term, per_period=False,
+               doc="weight per forward model switch (four per step; off by default)"),
 )  # fmt: skip
 GAIT_TERMS = tuple(t.name for t in REWARD_KINDS["gait"])
 """The gait reward's terms, in order (a new one is one entry above: its spec and function)."""
@@ -133,10 +156,11 @@ class GaitReward:
         self.cadence = np.zeros(5)  # indexed by the model, 1-4
         self.cadence[1:] = reward.target("cadence")
         self._gated = reward.gated
+        self.first_phase_s = reward.first_phase_s
         self._live = [c for c, t in enumerate(self.specs) if t.per_period]
 
     def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive, command=None,
-              tau_sq=None):  # fmt: skip
+              tau_sq=None, first_phase=None, switches=None):  # fmt: skip
         """(n, k + 1): the terms (the kind's order) and their sum, after a period.
 
         ``progress_m``: the hip's forward progress in the period [m]; ``alive``: periods not
@@ -144,7 +168,7 @@ class GaitReward:
         rest as :class:`Period`'s.
         """
         p = Period(progress_m / self.dt, hip_z, swing_vy, modes, model_time_s, steps, command,
-                   tau_sq)  # fmt: skip
+                   tau_sq, first_phase, switches)  # fmt: skip
         out = np.empty((len(progress_m), len(self.specs) + 1))
         gate = None
         for c, t in enumerate(self.specs):

@@ -103,6 +103,9 @@ class RewardSettings:
     targets: tuple[float | tuple[float, ...] | None, ...] = ()
     gated: bool = False
     """The gait reward: its task terms multiplied by the cadence kernel."""
+    first_phase_s: float | None = None
+    """The gait and command rewards: the cadence target of a start near rest's first contact phase
+    [s] (None: its model's target)."""
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -138,17 +141,22 @@ class RewardSettings:
             out["targets"] = targets
         if self.gated:
             out["gated"] = True
+        if self.first_phase_s is not None:
+            out["first_phase_s"] = self.first_phase_s
         return out
 
 
 def reward_settings(reward: Any) -> RewardSettings:
     """The ``reward`` kwarg: a kind's name or ``{"kind", "weights", "kernels", ...}``.
 
-    The dict's other keys: ``"targets"`` (the gait reward's) and ``"gated"`` (the gait
-    reward's task terms gated by the cadence kernel).
+    The dict's other keys: ``"targets"`` (the gait reward's), ``"gated"`` (the gait
+    reward's task terms gated by the cadence kernel) and ``"first_phase_s"`` (the gait and
+    command rewards: the cadence target of a start near rest's first contact phase [s]).
     """
     spec = {"kind": reward} if isinstance(reward, str) else reward
-    check_mapping("reward", spec, ("kind", "weights", "kernels", "targets", "gated"))
+    check_mapping(
+        "reward", spec, ("kind", "weights", "kernels", "targets", "gated", "first_phase_s")
+    )
     kind = check_choice("reward kind", spec.get("kind", "env"), sorted(REWARD_KINDS))
     terms = REWARD_KINDS[kind]
     names = [t.name for t in terms]
@@ -173,9 +181,15 @@ def reward_settings(reward: Any) -> RewardSettings:
                          f"not {kind!r}'s")  # fmt: skip
     if not isinstance(gated, bool):
         raise ValueError(f"reward 'gated' must be a bool, got {gated!r}")
+    first = spec.get("first_phase_s")
+    if first is not None:
+        if kind not in ("gait", "command"):
+            raise ValueError(f"reward 'first_phase_s' is a setting of the 'gait' and 'command' "
+                             f"rewards, not {kind!r}'s")  # fmt: skip
+        first = check_real("reward 'first_phase_s'", first, 0.0, 1e3, unit=" [s]")
     return RewardSettings(kind, tuple(weights[n] for n in names),
                           tuple(kernels[n] for n in names),
-                          tuple(targets[n] for n in names), gated)  # fmt: skip
+                          tuple(targets[n] for n in names), gated, first)  # fmt: skip
 
 
 def _target(name: str, value: Any, per_model: bool) -> float | tuple[float, ...]:
@@ -322,7 +336,9 @@ class GaitRewardPart:
         out = core.gait.terms(rec[:, REC_PROGRESS], core.hip[:, 1], rec[:, REC_SWING_VY],
                               sim.ist[:, ST_MODE], core.clock.model_time_s(),
                               rec[:, REC_STEPS], ~terminated,
-                              tau_sq=rec[:, REC_TAU_SQ])  # fmt: skip
+                              tau_sq=rec[:, REC_TAU_SQ],
+                              first_phase=core.clock.opening,
+                              switches=rec[:, REC_SWITCHES])  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1]
@@ -342,7 +358,8 @@ class CommandRewardPart:
                                         rec[:, REC_SWING_VY], sim.ist[:, ST_MODE],
                                         core.clock.model_time_s(), rec[:, REC_STEPS],
                                         ~terminated, command,
-                                        tau_sq=rec[:, REC_TAU_SQ])  # fmt: skip
+                                        tau_sq=rec[:, REC_TAU_SQ],
+                                        first_phase=core.clock.opening)  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1]

@@ -26,7 +26,8 @@ class ModelTime:
 
     By the contact clock; with a command, only the periods of the phase run under a speed
     command count (standing holds a contact phase, and a restart from it has T from the new
-    command on). Reason ``model_time``.
+    command on). With ``max_first_phase_s`` also set, a start near rest's first contact phase is
+    that one's (:class:`FirstPhaseTime`). Reason ``model_time``.
     """
 
     reason = "model_time"
@@ -35,6 +36,13 @@ class ModelTime:
         """For ``core``'s clock and commands (if any), and the limit [s]."""
         self.clock, self.commands, self.limit_s = core.clock, core.commands, limit_s
         self.held = np.zeros(core.n, np.int64)  # periods of the phase under a speed command
+        self.rows = self._rows(core)
+
+    def _rows(self, core):
+        """Which rows the limit applies to: fn() -> (n,) bool, or None for every row."""
+        if core.settings.termination.get("max_first_phase_s") is None:
+            return None
+        return lambda: ~self.clock.opening
 
     def __call__(self, skip) -> np.ndarray:
         """(n,) the stepped rows that held their contact phase too long."""
@@ -48,14 +56,36 @@ class ModelTime:
             stepped[skip] = False
             self.held[stepped] = held[stepped]
         over = self.held * self.clock.dt > self.limit_s + 1e-9
+        if self.rows is not None:
+            over &= self.rows()
         if skip is not None:
             over[skip] = False
         return over
 
 
+class FirstPhaseTime(ModelTime):
+    """``termination={"max_first_phase_s": T}``: a start near rest's first contact phase too long.
+
+    Held longer than T [s]: the phase a start begins in, until its first model switch (from
+    rest: the sway on the flat foot before the first step, which takes longer than a walking
+    phase); counted as :class:`ModelTime` counts. Reason ``first_phase_time``.
+    """
+
+    reason = "first_phase_time"
+
+    def _rows(self, core):
+        """The rows still in their first contact phase."""
+        return lambda: self.clock.opening
+
+
 def check_model_time(value) -> float:
     """A contact phase's longest time [s]."""
     return check_real("max_model_time_s", value, 0.0, 1e3, low_open=True, unit=" [s]")
+
+
+def check_first_phase_time(value) -> float:
+    """The episode's first contact phase's longest time [s]."""
+    return check_real("max_first_phase_s", value, 0.0, 1e3, low_open=True, unit=" [s]")
 
 
 @dataclass(frozen=True)
@@ -72,6 +102,7 @@ class Termination:
 
 TERMINATIONS: dict[str, Termination] = {
     "max_model_time_s": Termination(check_model_time, ModelTime, needs_clock=True),
+    "max_first_phase_s": Termination(check_first_phase_time, FirstPhaseTime, needs_clock=True),
 }
 """The learning task's terminations by their ``termination`` key, in the order they run."""
 BUILT_IN = ("fall_hip_height_m", "time_limit_s")

@@ -22,17 +22,20 @@ def _reward(**targets):
     return GaitReward(reward_settings({"kind": "gait", "targets": targets}), 0.02, 1)
 
 
-def _terms(g, progress, z, swing_vy, mode, t_model, steps=0, alive=True):
+def _terms(g, progress, z, swing_vy, mode, t_model, steps=0, alive=True, switches=None):
+    sw = None if switches is None else np.array([switches])
     return g.terms(np.array([progress]), np.array([z]), np.array([swing_vy]), np.array([mode]),
-                   np.array([t_model]), np.array([steps]), np.array([alive]))[0]  # fmt: skip
+                   np.array([t_model]), np.array([steps]), np.array([alive]),
+                   switches=sw)[0]  # fmt: skip
 
 
 def test_terms_are_their_weights_at_the_targets_and_fall_as_documented():
     g = _reward()
     tg = {t: TERMS[t].target for t in TERMS if TERMS[t].target is not None}
     on = _terms(g, tg["speed"] * 0.02, tg["height"], tg["swing"], 1, tg["cadence"])
-    for c, name in enumerate(GAIT_TERMS[:-1]):
-        assert on[c] == pytest.approx(TERMS[name].weight)
+    for c, name in enumerate(GAIT_TERMS):
+        if TERMS[name].per_period:  # the kernel terms
+            assert on[c] == pytest.approx(TERMS[name].weight)
     assert on[-1] == pytest.approx(1.0)  # the kernel weights sum to one
 
     def kernel(name, e):
@@ -52,7 +55,15 @@ def test_terms_are_their_weights_at_the_targets_and_fall_as_documented():
     # a period ended by an event earns its steps only
     dead = _terms(g, tg["speed"] * 0.02, tg["height"], tg["swing"], 1, 0.0, steps=1, alive=False)
     np.testing.assert_array_equal(dead[:4], 0.0)
-    assert dead[4] == dead[5] == TERMS["step"].weight
+    assert dead[4] == dead[-1] == TERMS["step"].weight and dead[5] == 0.0  # no switch given
+    # the switch term (off by default): its weight per forward model switch, however the
+    # period ended
+    sw = GaitReward(reward_settings({"kind": "gait", "weights": {"switch": 2.5}}), 0.02, 1)
+    for alive in (True, False):
+        out = _terms(sw, 0.0, 0.0, 0.0, 3, 0.0, steps=1, alive=alive, switches=3)
+        assert out[GAIT_TERMS.index("switch")] == 7.5
+        assert out[-1] == pytest.approx(out[:-1].sum())
+    assert _terms(g, 0.0, 0.0, 0.0, 3, 0.0, switches=3)[GAIT_TERMS.index("switch")] == 0.0
     # targets are the reward's settings
     assert _terms(_reward(speed=0.5), 0.5 * 0.02, 0, 0, 3, 0)[0] == TERMS["speed"].weight
 
@@ -72,7 +83,7 @@ def test_per_model_cadence_targets_and_the_gate():
         on_time = np.exp(-k * 0.2**2)
         assert plain[3] == pytest.approx(w * on_time)
         np.testing.assert_allclose(gate[:3], plain[:3] * on_time, rtol=1e-12)
-        assert gate[3] == plain[3] and gate[5] == pytest.approx(gate[:5].sum())
+        assert gate[3] == plain[3] and gate[-1] == pytest.approx(gate[:-1].sum())
         in_time = (0.02, 2.9, 0.7, mode, target - 0.01)
         np.testing.assert_array_equal(_terms(gated, *in_time), _terms(g, *in_time))
     s = make_settings(reward={"kind": "gait", "targets": {"cadence": list(per)}, "gated": True})

@@ -43,6 +43,46 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     )
 
 
+def initial_actions(model, cfg: PPOConfig) -> None:
+    """The config's initial exploration noise and action bias on a new network (in place).
+
+    ``log_std_joints`` (one log-std per joint) or ``action_std_nm``, and ``action_bias_nm``
+    (the action mean's bias, in N m, as the last layer's bias in action units).
+    """
+    import torch
+
+    if len(cfg.log_std_joints) == 5:
+        model.policy.log_std.data[:] = torch.as_tensor(cfg.log_std_joints)
+    elif cfg.log_std_joints:
+        raise ValueError("--log-std-joints needs 5 values (one per joint) or none")
+    gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
+    if cfg.action_std_nm > 0:
+        model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
+    if cfg.action_bias_nm:
+        bias = torch.as_tensor(cfg.action_bias_nm, dtype=torch.float32)
+        model.policy.action_net.bias.data[:] = bias / gear
+
+
+def redraw_network(model, cfg: PPOConfig, seed: int) -> None:
+    """The model's network, noise and optimiser as a new run of ``seed`` would draw them.
+
+    The weights of SB3's policy built right after seeding torch with ``seed`` (as
+    ``PPO(seed=seed)`` builds it), loaded into the model's own policy; then
+    :func:`initial_actions`, and a fresh optimiser. The normaliser, the env and the step count
+    go on.
+    """
+    import torch
+
+    torch.manual_seed(seed)
+    p = model.policy
+    fresh = model.policy_class(model.observation_space, model.action_space, model.lr_schedule,
+                               use_sde=model.use_sde, **model.policy_kwargs)  # fmt: skip
+    p.load_state_dict(fresh.state_dict())
+    initial_actions(model, cfg)
+    p.optimizer = p.optimizer_class(p.parameters(), lr=model.lr_schedule(1.0),
+                                    **p.optimizer_kwargs)  # fmt: skip
+
+
 def training_env(
     cfg: PPOConfig,
     seed: int,

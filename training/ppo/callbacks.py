@@ -138,6 +138,84 @@ def start_curriculum(cfg: PPOConfig, switched_at: int | None):
     return StartCurriculum()
 
 
+RESTART_SEED_STRIDE = 1000
+"""The k-th restart draws the network of seed + k x this."""
+
+
+def restart_rule(cfg: PPOConfig, restarts: list[int]):
+    """A callback: ``[restart]``, a network that has not found the step draws again.
+
+    At every ``every`` env steps (checked after the rollout that reaches it), while fewer than
+    ``max`` restarts were made: if the training episodes that ended in the last ``window`` env
+    steps completed fewer than ``min_steps`` walking steps in all, the network is drawn again
+    (:func:`~training.ppo.build.redraw_network`, seed + RESTART_SEED_STRIDE x k for the k-th).
+    The rule reads training episodes only, never an evaluation. A check needs a whole window
+    seen by this session (after a resume it waits for one). ``restarts``: the env steps of the
+    restarts so far (a resume's); its ``restarts`` go into every checkpoint.
+    """
+    from collections import deque
+
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from training.ppo.build import redraw_network
+
+    r = cfg.restart
+
+    class RestartRule(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.restarts = list(restarts)
+            self.ends = deque()  # (env step, steps completed) of the episodes that ended
+            self.pending = None  # the seed of a network to draw before the next rollout
+
+        def _on_training_start(self) -> None:
+            n = self.model.num_timesteps
+            self.seen_from = n
+            self.next_check = (n // r["every"] + 1) * r["every"]
+
+        def _on_step(self) -> bool:
+            dones = self.locals["dones"]
+            if dones.any():
+                n, infos = self.model.num_timesteps, self.locals["infos"]
+                for i in np.flatnonzero(dones):
+                    self.ends.append((n, int(infos[i]["steps_completed"])))
+            return True
+
+        def steps_in_window(self) -> int:
+            """Steps completed by the training episodes that ended in the last window."""
+            since = self.model.num_timesteps - r["window"]
+            while self.ends and self.ends[0][0] <= since:
+                self.ends.popleft()
+            return sum(s for _, s in self.ends)
+
+        def _on_rollout_end(self) -> None:
+            n = self.model.num_timesteps
+            if n < self.next_check or n - self.seen_from < r["window"]:
+                return
+            self.next_check = (n // r["every"] + 1) * r["every"]
+            steps = self.steps_in_window()
+            self.logger.record("train/window_steps", steps)
+            if len(self.restarts) >= r["max"] or steps >= r["min_steps"]:
+                return
+            self.restarts.append(int(n))
+            self.pending = cfg.seed + RESTART_SEED_STRIDE * len(self.restarts)
+            self.ends.clear()
+            self.seen_from = n
+            print(f"[restart] {n} env steps: the training episodes of the last {r['window']} "
+                  f"env steps completed {steps} steps (< {r['min_steps']}); restart "
+                  f"{len(self.restarts)} of at most {r['max']}: a new network (seed "
+                  f"{self.pending}) from the next rollout", flush=True)  # fmt: skip
+
+        def _on_rollout_start(self) -> None:
+            # after the update on the last rollout (the old network's own data): the new
+            # network collects the next one
+            if self.pending is not None:
+                redraw_network(self.model, cfg, self.pending)
+                self.pending = None
+
+    return RestartRule()
+
+
 def progress_bar(cfg: PPOConfig):
     """A bar over the run's whole total: a resumed run starts where it stopped, ETA included."""
     from stable_baselines3.common.callbacks import BaseCallback

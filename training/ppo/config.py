@@ -78,6 +78,12 @@ class PPOConfig:
     # completed at least this many steps in stop_evals consecutive evaluations (its own
     # criterion, on the selection seeds); 0: it trains to total_timesteps
     stop_evals: int = 2  # consecutive evaluations the stop criterion must hold
+    restart: dict = field(default_factory=dict)  # [restart] table: a network that has not
+    # found the step draws again: at every `every` env steps, while fewer than `max` restarts
+    # were made, if the training episodes that ended in the last `window` env steps completed
+    # fewer than `min_steps` steps in all, the network, its noise and its optimiser start
+    # again from the initial draw of seed + 1000 x (restart number) ({}: never; the restarts
+    # are saved with the checkpoint)
     checkpoint_freq: int = 250_000  # env steps between checkpoints (resume continues there)
     base_controller: str = ""  # "model": learn a residual on the model controller ("" = none)
     gear: tuple[float, ...] = (150.0,)  # N m per unit action, one value or one per joint
@@ -159,6 +165,26 @@ class PPOConfig:
             except (ValueError, TypeError) as e:
                 raise ValueError(f"[{name}]: {e}") from None
         self._check_start_curriculum()  # on the valid training env
+        self._check_restart()
+
+    RESTART_KEYS = ("every", "window", "min_steps", "max")
+
+    def _check_restart(self) -> None:
+        """Refuse a ``[restart]`` with a wrong key or value, or a window longer than a period."""
+        r = self.restart
+        if not r:
+            return
+        if set(r) != set(self.RESTART_KEYS):
+            raise ValueError(f"[restart] takes {', '.join(self.RESTART_KEYS)}, got {sorted(r)}")
+        for k in self.RESTART_KEYS:
+            v = r[k]
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 < v <= 10**9:
+                raise ValueError(f"[restart] {k} must be a whole number in [1, 1e9], got {v!r}")
+        if r["max"] > 100:
+            raise ValueError(f"[restart] max must be at most 100, got {r['max']!r}")
+        if r["window"] > r["every"]:
+            raise ValueError(f"[restart] window ({r['window']}) must be at most every "
+                             f"({r['every']}) env steps")  # fmt: skip
 
     def _check_start_curriculum(self) -> None:
         """Refuse a ``[start_curriculum]`` with a wrong key or start, or a switch never reached."""

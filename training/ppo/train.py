@@ -41,12 +41,13 @@ from training.plumbing.common import (
 )
 from training.plumbing.outputs import OutDir, RunLock, check_tree
 from training.plumbing.safe_files import read_npz
-from training.ppo.build import make_model, training_env
+from training.ppo.build import initial_actions, make_model, training_env
 from training.ppo.callbacks import (
     critic_warmup,
     gamma_schedule,
     make_callbacks,
     progress_bar,
+    restart_rule,
     start_curriculum,
     stop_reason,
     truncate_eval_csv,
@@ -203,15 +204,13 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     from (None: a new run); ``extend``: the resume gave a new total (a run that stopped by
     its criterion trains on only then).
     """
-    import torch
-
     fs = Path(run.where())  # the run through its held descriptor: every snapshot written there
     best = -np.inf
     if available(run.path, "best"):
         best = load_state(open_snapshot(run.path, "best")).get("score", -np.inf)
     demos = None
     resuming = checkpoint is not None
-    start, streak, stopped, switched_at = 0, 0, False, None
+    start, streak, stopped, switched_at, restarts = 0, 0, False, None, []
     if resuming:
         n = cfg.obs_dim()
         model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
@@ -231,6 +230,13 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         if switched_at is not None and (type(switched_at) is not int or switched_at < 0):
             raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: starts_switched_at must "
                                      f"be an env step count or null")  # fmt: skip
+        restarts = state.get("restarts", [])
+        if (not isinstance(restarts, list) or len(restarts) > cfg.restart.get("max", 0)
+                or any(type(t) is not int or not 0 <= t <= start for t in restarts)
+                or restarts != sorted(restarts)):  # fmt: skip
+            raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: restarts must be the "
+                                     f"env steps of at most [restart] max restarts, in "
+                                     f"order")  # fmt: skip
         print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
     elif cfg.teacher and available(run.path, "imitation"):
         n = cfg.obs_dim()
@@ -246,18 +252,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     else:
         model = make_model(cfg, vecnorm, fs)
     if model.num_timesteps == 0:
-        if len(cfg.log_std_joints) == 5:
-            model.policy.log_std.data[:] = torch.as_tensor(cfg.log_std_joints)
-        elif cfg.log_std_joints:
-            raise Refusal("train_ppo: error: --log-std-joints needs 5 values (one per joint) "
-                          "or none")  # fmt: skip
-        if cfg.action_std_nm > 0:
-            gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
-            model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
-        if cfg.action_bias_nm:  # the initial action mean's bias, in action units
-            gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
-            bias = torch.as_tensor(cfg.action_bias_nm, dtype=torch.float32)
-            model.policy.action_net.bias.data[:] = bias / gear
+        try:
+            initial_actions(model, cfg)
+        except ValueError as e:
+            raise Refusal(f"train_ppo: error: {e}") from None
         if cfg.teacher and not available(run.path, "imitation"):  # the imitation result alone
             arrays = {"demos.npz": {"obs": demos.obs, "act": demos.act}}
             save_snapshot(fs / "imitation", model.policy, {"num_timesteps": 0}, vecnorm,
@@ -283,7 +281,13 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     t0 = time.time()
     wall0 = load_state(checkpoint).get("wall_s", 0.0) if resuming else 0.0
     curriculum = start_curriculum(cfg, switched_at) if cfg.start_curriculum else None
-    more_state = (lambda: {"starts_switched_at": curriculum.switched_at}) if curriculum else dict
+    redraw = restart_rule(cfg, restarts) if cfg.restart else None
+
+    def more_state():
+        """What the checkpoint saves of the start curriculum and the restart rule."""
+        return {**({"starts_switched_at": curriculum.switched_at} if curriculum else {}),
+                **({"restarts": list(redraw.restarts)} if redraw else {})}  # fmt: skip
+
     callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak,
                               more_state)  # fmt: skip
     callback.stopped = stopped
@@ -298,6 +302,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                     update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
                     *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0 else []),
                     *([curriculum] if curriculum else []),
+                    *([redraw] if redraw else []),
                     *([progress_bar(cfg)] if cfg.progress else []),
                 ],
                 reset_num_timesteps=start == 0,
