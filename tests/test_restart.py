@@ -87,6 +87,16 @@ def test_a_run_without_steps_restarts_up_to_max_and_a_resume_keeps_the_restarts(
     out = capsys.readouterr().out
     assert out.count("[restart] ") == 2 and "(seed 2000)" in out
     assert load_state(run / "checkpoints" / "latest")["restarts"] == [256, 512]
+    assert "; restarts at [256, 512] env steps" in (run / "training_time.txt").read_text()
+    from training.evaluation.seed_study import restarts_of, table
+
+    assert restarts_of(run) == [256, 512]
+    row = {"ended": "budget", "env_steps": 1024, "wall_s": 3, "steps_mean": 0.0,
+           "speed_m_s": 0.0, "success": {"successes": 0, "episodes": 1, "rate": 0.0,
+                                         "ci95": [0.0, 0.79], "min_steps": 20}}  # fmt: skip
+    text = table(["a", "b"], [{**row, "restarts": [1003520, 2007040]}, {**row, "restarts": []}])
+    assert "restarts (env steps)" in text and "| 1.0M, 2.0M |" in text and "| none |" in text
+    assert "restarts" not in table(["b"], [{**row, "restarts": []}])
     assert train_ppo.main(["--resume", str(run), "--total-timesteps", "1536",
                            "--progress", "false"]) == 0  # fmt: skip
     assert "[restart] " not in capsys.readouterr().out  # max reached

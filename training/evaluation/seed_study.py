@@ -5,13 +5,14 @@ r"""A recipe's training seeds in one table, one figure and one summary.
 
 Each run is a training run directory (its ``eval.csv``: the selection evaluations; its
 ``published.json`` and ``training_time.txt``: which snapshot it publishes and why, how it
-ended); each evaluation the ``evaluation.json`` that ``training.evaluation.evaluate RUN``
-wrote of that run's published snapshot on the report seeds. Writes ``seeds.md`` (a row per
-seed: how the run ended, env steps, wall time, success on the report episodes with its 95%
-interval), ``summary.json`` (the fraction of seeds whose published policy walks at least
-``--walk-rate`` of its report episodes, and the interquartile mean of the success rates with
-a 95% bootstrap interval over the seeds, rliable's statistics) and ``curves.png`` (every
-seed's selection evaluations). Reads only the files named; writes only ``--out``.
+ended; its checkpoint: the restart rule's restarts); each evaluation the ``evaluation.json``
+that ``training.evaluation.evaluate RUN`` wrote of that run's published snapshot on the report
+seeds. Writes ``seeds.md`` (a row per seed: how the run ended, env steps, wall time, the
+restarts where a run made any, success on the report episodes with its 95% interval),
+``summary.json`` (the fraction of seeds whose published policy walks at least ``--walk-rate``
+of its report episodes, and the interquartile mean of the success rates with a 95% bootstrap
+interval over the seeds, rliable's statistics) and ``curves.png`` (every seed's selection
+evaluations). Reads only the files named; writes only ``--out``.
 """
 
 from __future__ import annotations
@@ -49,11 +50,24 @@ def run_record(run: Path, evaluation: Path) -> dict:
         "env_steps": int(sessions[-1][0]),
         "wall_s": sum(int(s[1]) for s in sessions),
         "ended": ended,
+        "restarts": restarts_of(run),
         "published": published.get("snapshot"),
         "success": result["success"],
         "steps_mean": result["steps_mean"],
         "speed_m_s": result["speed_mean_m_s"],
     }
+
+
+def restarts_of(run: Path) -> list[int]:
+    """The env steps at which the run's restart rule drew a new network (its checkpoint's)."""
+    from training.ppo.policy_io import available, load_state, open_snapshot
+
+    if not available(run, "checkpoint"):
+        return []
+    restarts = load_state(open_snapshot(run, "checkpoint")).get("restarts", [])
+    if not isinstance(restarts, list) or any(type(t) is not int or t < 0 for t in restarts):
+        raise ValueError(f"{run}: the checkpoint's restarts must be a list of env step counts")
+    return restarts
 
 
 def summarize(records: list[dict], walk_rate: float) -> dict:
@@ -76,12 +90,18 @@ def summarize(records: list[dict], walk_rate: float) -> dict:
 
 def table(labels: list[str], records: list[dict]) -> str:
     """The seeds' markdown table."""
-    rows = ["| seed | the run ended | env steps | wall | published snapshot on the report "
-            "seeds | steps, speed |", "|---|---|---|---|---|---|"]  # fmt: skip
+    restarted = any(r.get("restarts") for r in records)  # a column only where a run restarted
+    rows = ["| seed | the run ended | env steps | wall | "
+            + ("restarts (env steps) | " if restarted else "")
+            + "published snapshot on the report seeds | steps, speed |",
+            "|---|---|---|---|" + ("---|" if restarted else "") + "---|---|"]  # fmt: skip
     for label, r in zip(labels, records, strict=True):
+        at = ", ".join(f"{t / 1e6:.1f}M" for t in r.get("restarts", [])) or "none"
         rows.append(
             f"| {label} | {r['ended']} | {r['env_steps'] / 1e6:.1f}M | {r['wall_s']} s | "
-            f"{format_success(r['success'])} | {r['steps_mean']:.1f}, {r['speed_m_s']:.2f} m/s |"
+            + (f"{at} | " if restarted else "")
+            + f"{format_success(r['success'])} | {r['steps_mean']:.1f}, "
+            f"{r['speed_m_s']:.2f} m/s |"
         )
     return "\n".join(rows) + "\n"
 

@@ -316,9 +316,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     ended = (f"stopped: {stop_reason(cfg)}" if callback.stopped
              else f"the budget of {cfg.total_timesteps} env steps ended")  # fmt: skip
     publish(cfg, run, ended)
+    redrawn = f"; restarts at {redraw.restarts} env steps" if redraw and redraw.restarts else ""
     run.append(
         "training_time.txt",
-        f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session; {ended}\n",
+        f"PPO: {model.num_timesteps} env steps, {wall:.0f} s wall this session; {ended}{redrawn}\n",
     )
     from training.plumbing.plots import learning_curve
 
