@@ -153,6 +153,15 @@ def test_the_rule_counts_the_steps_of_the_episodes_ended_in_the_window(monkeypat
     assert drawn == [1007, 2007] and cb.restarts == [1024, 3072]
     rollout(4096)
     assert drawn == [1007, 2007]  # max reached
+    ending = restart_rule(cfg, [])  # a restart decided at the last rollout is not made
+    ending.init_callback(model)
+    model.num_timesteps = 0
+    ending.on_training_start({}, {})
+    model.num_timesteps = 1024
+    ending.on_rollout_end()
+    assert ending.restarts == [1024]
+    ending.on_training_end()
+    assert ending.restarts == [] and ending.pending is None
     resumed = restart_rule(cfg, [1024])  # a resume at 5000: a whole window of its own first
     resumed.init_callback(model)
     model.num_timesteps = 5000

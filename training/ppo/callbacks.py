@@ -213,6 +213,15 @@ def restart_rule(cfg: PPOConfig, restarts: list[int]):
                 redraw_network(self.model, cfg, self.pending)
                 self.pending = None
 
+        def _on_training_end(self) -> None:
+            # training ended before the next rollout: the restart decided was not made (the
+            # checkpoint keeps the network it has; a resume checks again)
+            if self.pending is not None:
+                self.restarts.pop()
+                self.pending = None
+                print("[restart] training ended before the new network's first rollout: no "
+                      "restart made", flush=True)  # fmt: skip
+
     return RestartRule()
 
 
