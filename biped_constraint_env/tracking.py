@@ -179,6 +179,7 @@ class Tracking:
             self.which[slots] = r
             self.clock.first[slots] = ref.first[rr].astype(bool)
             self.clock.j[slots] = self._env_periods(ref.j[rr])
+            self.clock.opening[slots] &= ref.j[rr] == 0  # mid-phase: not a phase's start
             self.first[slots] = ref.step[rr] == 0
         self.place(idx[own], sim)
 

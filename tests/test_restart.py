@@ -35,6 +35,27 @@ def test_a_restart_rule_is_refused_when_wrong(rule, match):
     _cfg(restart=RULE).validate()
 
 
+@pytest.mark.parametrize("kw", [{"teacher": "model"}, {"init_from": "policies/x"},
+                                {"critic_warmup": 2}])  # fmt: skip
+def test_a_restart_rule_is_refused_where_the_network_does_not_start_random(kw):
+    with pytest.raises(ValueError, match="draws a random network: not with"):
+        _cfg(restart=RULE, **kw).validate()
+
+
+def test_untrusted_restart_lists_are_refused():
+    from training.ppo.callbacks import check_restart_checked, check_restarts
+    from training.ppo.policy_io import UntrustedFileError
+
+    assert check_restarts([1000, 2000], "s", 2000, 3) == [1000, 2000]
+    for bad in ([0, 0], [5, 5], [2000, 1000], [1000, 2001], [True], [1.0], "1000", [1, 2, 3, 4]):
+        with pytest.raises(UntrustedFileError, match="restarts must be"):
+            check_restarts(bad, "s", 2000, 3)
+    assert check_restart_checked(None, "s", 10) is None and check_restart_checked(10, "s", 10)
+    for bad in (-1, 11, "5", 2.0):
+        with pytest.raises(UntrustedFileError, match="restart_checked"):
+            check_restart_checked(bad, "s", 10)
+
+
 def test_a_redrawn_network_is_the_new_seed_s_first_network(tmp_path):
     """After ``redraw_network(model, cfg, s)`` the weights, the initial noise and the bias are
     those a new run with seed s starts from, and the optimiser is new (no moments)."""
@@ -162,6 +183,28 @@ def test_the_rule_counts_the_steps_of_the_episodes_ended_in_the_window(monkeypat
     assert ending.restarts == [1024]
     ending.on_training_end()
     assert ending.restarts == [] and ending.pending is None
+    # a resume at 5100 whose last check made was at 4096: the check due at 5000 was not made;
+    # it is made once the session has seen a whole window (5600)
+    late = restart_rule(cfg, [1024], checked=4096)
+    late.init_callback(model)
+    model.num_timesteps = 5100
+    late.on_training_start({}, {})
+    model.num_timesteps = 5400
+    late.on_rollout_end()
+    late.on_rollout_start()
+    assert late.restarts == [1024]  # not a whole window yet
+    model.num_timesteps = 5632
+    late.on_rollout_end()
+    late.on_rollout_start()
+    assert late.restarts == [1024, 5632] and late.checked == 5632
+    made = restart_rule(cfg, [1024], checked=5000)  # that check made before the checkpoint
+    made.init_callback(model)
+    model.num_timesteps = 5100
+    made.on_training_start({}, {})
+    model.num_timesteps = 5632
+    made.on_rollout_end()
+    assert made.restarts == [1024] and made.next_check == 6000
+    drawn.clear()
     resumed = restart_rule(cfg, [1024])  # a resume at 5000: a whole window of its own first
     resumed.init_callback(model)
     model.num_timesteps = 5000
@@ -169,4 +212,4 @@ def test_the_rule_counts_the_steps_of_the_episodes_ended_in_the_window(monkeypat
     model.num_timesteps = 6000
     resumed.on_rollout_end()
     resumed.on_rollout_start()
-    assert drawn == [1007, 2007, 2007] and resumed.restarts == [1024, 6000]
+    assert drawn == [2007] and resumed.restarts == [1024, 6000]

@@ -25,7 +25,7 @@ from training.evaluation.stats import format_success, iqm_interval
 from training.plumbing.common import CliParser, command
 from training.plumbing.outputs import command_output, write_file
 from training.plumbing.safe_files import parse_json_object, read_bytes
-from training.ppo.policy_io import json_text
+from training.ppo.policy_io import UntrustedFileError, json_text
 
 MAX_FILE_BYTES = 64 * 2**20
 """Largest evaluation or run file read [bytes]."""
@@ -60,14 +60,16 @@ def run_record(run: Path, evaluation: Path) -> dict:
 
 def restarts_of(run: Path) -> list[int]:
     """The env steps at which the run's restart rule drew a new network (its checkpoint's)."""
+    from training.ppo.callbacks import check_restarts
     from training.ppo.policy_io import available, load_state, open_snapshot
 
     if not available(run, "checkpoint"):
         return []
-    restarts = load_state(open_snapshot(run, "checkpoint")).get("restarts", [])
-    if not isinstance(restarts, list) or any(type(t) is not int or t < 0 for t in restarts):
-        raise ValueError(f"{run}: the checkpoint's restarts must be a list of env step counts")
-    return restarts
+    state = load_state(open_snapshot(run, "checkpoint"))
+    steps = state.get("num_timesteps")
+    if type(steps) is not int or not 0 <= steps <= 10**12:
+        raise UntrustedFileError(f"{run}: the checkpoint's num_timesteps is not an env step count")
+    return check_restarts(state.get("restarts", []), f"{run}: the checkpoint", steps)
 
 
 def summarize(records: list[dict], walk_rate: float) -> dict:

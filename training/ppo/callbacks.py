@@ -140,9 +140,32 @@ def start_curriculum(cfg: PPOConfig, switched_at: int | None):
 
 RESTART_SEED_STRIDE = 1000
 """The k-th restart draws the network of seed + k x this."""
+MAX_RESTARTS = 100
+"""The most restarts ``[restart]`` allows (``max``)."""
 
 
-def restart_rule(cfg: PPOConfig, restarts: list[int]):
+def check_restarts(restarts, where: str, max_step: int, max_count: int = MAX_RESTARTS):
+    """An untrusted checkpoint's ``restarts``, checked.
+
+    Strictly increasing env step counts in [1, ``max_step``], at most ``max_count`` of them
+    (else :class:`UntrustedFileError`).
+    """
+    if (not isinstance(restarts, list) or len(restarts) > max_count
+            or any(type(t) is not int or not 1 <= t <= max_step for t in restarts)
+            or any(a >= b for a, b in zip(restarts[:-1], restarts[1:], strict=True))):  # fmt: skip
+        raise UntrustedFileError(f"{where}: restarts must be the env steps of at most "
+                                 f"{max_count} restarts, in order")  # fmt: skip
+    return restarts
+
+
+def check_restart_checked(value, where: str, max_step: int):
+    """An untrusted checkpoint's ``restart_checked``: None or an env step count <= max_step."""
+    if value is not None and (type(value) is not int or not 0 <= value <= max_step):
+        raise UntrustedFileError(f"{where}: restart_checked must be an env step count or null")
+    return value
+
+
+def restart_rule(cfg: PPOConfig, restarts: list[int], checked: int | None = None):
     """A callback: ``[restart]``, a network that has not found the step draws again.
 
     At every ``every`` env steps (checked after the rollout that reaches it), while fewer than
@@ -150,8 +173,10 @@ def restart_rule(cfg: PPOConfig, restarts: list[int]):
     steps completed fewer than ``min_steps`` walking steps in all, the network is drawn again
     (:func:`~training.ppo.build.redraw_network`, seed + RESTART_SEED_STRIDE x k for the k-th).
     The rule reads training episodes only, never an evaluation. A check needs a whole window
-    seen by this session (after a resume it waits for one). ``restarts``: the env steps of the
-    restarts so far (a resume's); its ``restarts`` go into every checkpoint.
+    seen by this session: after a resume, a check that was due and not made (``checked``: the
+    env step of the last check made, None: none) is made once the session has seen one.
+    ``restarts``: the env steps of the restarts so far (a resume's); its ``restarts`` and
+    ``checked`` go into every checkpoint.
     """
     from collections import deque
 
@@ -167,11 +192,14 @@ def restart_rule(cfg: PPOConfig, restarts: list[int]):
             self.restarts = list(restarts)
             self.ends = deque()  # (env step, steps completed) of the episodes that ended
             self.pending = None  # the seed of a network to draw before the next rollout
+            self.checked = checked  # the env step of the last check made (None: none)
 
         def _on_training_start(self) -> None:
             n = self.model.num_timesteps
             self.seen_from = n
-            self.next_check = (n // r["every"] + 1) * r["every"]
+            due = (n // r["every"]) * r["every"]  # a check due and not made is made again
+            made = self.checked is not None and self.checked >= due
+            self.next_check = due + r["every"] if due == 0 or made else due
 
         def _on_step(self) -> bool:
             dones = self.locals["dones"]
@@ -196,6 +224,7 @@ def restart_rule(cfg: PPOConfig, restarts: list[int]):
             steps = self.steps_in_window()
             self.logger.record("train/window_steps", steps)
             if len(self.restarts) >= r["max"] or steps >= r["min_steps"]:
+                self.checked = int(n)
                 return
             self.restarts.append(int(n))
             self.pending = cfg.seed + RESTART_SEED_STRIDE * len(self.restarts)
@@ -211,11 +240,14 @@ def restart_rule(cfg: PPOConfig, restarts: list[int]):
             # network collects the next one
             if self.pending is not None:
                 redraw_network(self.model, cfg, self.pending)
+                if cfg.use_sde:
+                    self.model.policy.reset_noise(self.model.n_envs)
                 self.pending = None
+                self.checked = self.restarts[-1]
 
         def _on_training_end(self) -> None:
             # training ended before the next rollout: the restart decided was not made (the
-            # checkpoint keeps the network it has; a resume checks again)
+            # checkpoint keeps the network it has and the check as not made: a resume makes it)
             if self.pending is not None:
                 self.restarts.pop()
                 self.pending = None

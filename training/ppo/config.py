@@ -182,6 +182,11 @@ class PPOConfig:
                 raise ValueError(f"[restart] {k} must be a whole number in [1, 1e9], got {v!r}")
         if r["max"] > 100:
             raise ValueError(f"[restart] max must be at most 100, got {r['max']!r}")
+        for name, on in (("teacher", self.teacher), ("init_from", self.init_from),
+                         ("critic_warmup", self.critic_warmup > 0)):  # fmt: skip
+            if on:
+                raise ValueError(f"[restart] draws a random network: not with {name} (its "
+                                 f"network does not start random)")  # fmt: skip
         if r["window"] > r["every"]:
             raise ValueError(f"[restart] window ({r['window']}) must be at most every "
                              f"({r['every']}) env steps")  # fmt: skip

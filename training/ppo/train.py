@@ -43,6 +43,8 @@ from training.plumbing.outputs import OutDir, RunLock, check_tree
 from training.plumbing.safe_files import read_npz
 from training.ppo.build import initial_actions, make_model, training_env
 from training.ppo.callbacks import (
+    check_restart_checked,
+    check_restarts,
     critic_warmup,
     gamma_schedule,
     make_callbacks,
@@ -210,7 +212,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         best = load_state(open_snapshot(run.path, "best")).get("score", -np.inf)
     demos = None
     resuming = checkpoint is not None
-    start, streak, stopped, switched_at, restarts = 0, 0, False, None, []
+    start, streak, stopped, switched_at, restarts, checked = 0, 0, False, None, [], None
     if resuming:
         n = cfg.obs_dim()
         model = make_model(cfg, vecnorm, fs, np.zeros(n), np.ones(n))
@@ -230,13 +232,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         if switched_at is not None and (type(switched_at) is not int or switched_at < 0):
             raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: starts_switched_at must "
                                      f"be an env step count or null")  # fmt: skip
-        restarts = state.get("restarts", [])
-        if (not isinstance(restarts, list) or len(restarts) > cfg.restart.get("max", 0)
-                or any(type(t) is not int or not 0 <= t <= start for t in restarts)
-                or restarts != sorted(restarts)):  # fmt: skip
-            raise UntrustedFileError(f"{checkpoint.name(STATE_FILE)}: restarts must be the "
-                                     f"env steps of at most [restart] max restarts, in "
-                                     f"order")  # fmt: skip
+        where = checkpoint.name(STATE_FILE)
+        restarts = check_restarts(state.get("restarts", []), where, start,
+                                  cfg.restart.get("max", 0))  # fmt: skip
+        checked = check_restart_checked(state.get("restart_checked"), where, start)
         print(f"resuming PPO at {model.num_timesteps} of {cfg.total_timesteps} env steps")
     elif cfg.teacher and available(run.path, "imitation"):
         n = cfg.obs_dim()
@@ -281,12 +280,13 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     t0 = time.time()
     wall0 = load_state(checkpoint).get("wall_s", 0.0) if resuming else 0.0
     curriculum = start_curriculum(cfg, switched_at) if cfg.start_curriculum else None
-    redraw = restart_rule(cfg, restarts) if cfg.restart else None
+    redraw = restart_rule(cfg, restarts, checked) if cfg.restart else None
 
     def more_state():
         """What the checkpoint saves of the start curriculum and the restart rule."""
         return {**({"starts_switched_at": curriculum.switched_at} if curriculum else {}),
-                **({"restarts": list(redraw.restarts)} if redraw else {})}  # fmt: skip
+                **({"restarts": list(redraw.restarts), "restart_checked": redraw.checked}
+                   if redraw else {})}  # fmt: skip
 
     callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak,
                               more_state)  # fmt: skip
