@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .actions import TORQUE_LIMIT_NM
-from .gait import GaitReward, height_term, kernel, speed_term, swing_term
+from .gait import GaitReward, cadence_targets, height_term, kernel, speed_term, swing_term
 from .rewards import REWARD_KINDS, RewardTerm
 from .validation import check_mapping, check_real
 
@@ -167,10 +167,7 @@ def command_cadence_term(r, p) -> np.ndarray:
     stretch = np.where(moving, np.minimum(MAX_STRETCH, speed / np.where(moving, p.command, 1.0)),
                        1.0)  # fmt: skip
     stretch = np.maximum(stretch, 1.0)
-    target = r.cadence[p.modes] * stretch
-    if r.first_phase_s is not None and p.first_phase is not None:
-        target = np.where(p.first_phase, r.first_phase_s, target)
-    over = np.maximum(p.model_time_s - target, 0.0)
+    over = np.maximum(p.model_time_s - cadence_targets(r, p, stretch), 0.0)
     return np.where(moving, kernel(r, "cadence", over), 1.0)
 
 

@@ -85,13 +85,13 @@ def swing_term(r, p: Period) -> np.ndarray:
     return np.where(np.isin(p.modes, SWING_MODELS), kernel(r, "swing", short), 1.0)
 
 
-def cadence_targets(r, p: Period) -> np.ndarray:
+def cadence_targets(r, p: Period, stretch=1.0) -> np.ndarray:
     """Each row's cadence target [s].
 
-    Its model's, or in a start near rest's first contact phase the reward's ``first_phase_s`` where
-    it is set.
+    Its model's (times ``stretch``), or in a start near rest's first contact phase the
+    reward's ``first_phase_s`` where it is set.
     """
-    target = r.cadence[p.modes]
+    target = r.cadence[p.modes] * stretch
     if r.first_phase_s is None or p.first_phase is None:
         return target
     return np.where(p.first_phase, r.first_phase_s, target)

@@ -183,33 +183,30 @@ def test_the_rule_counts_the_steps_of_the_episodes_ended_in_the_window(monkeypat
     assert ending.restarts == [1024]
     ending.on_training_end()
     assert ending.restarts == [] and ending.pending is None
+
+    def resume(at, checked=None):  # the rule of a session resumed at env step ``at``
+        cb = restart_rule(cfg, [1024], checked=checked)
+        cb.init_callback(model)
+        model.num_timesteps = at
+        cb.on_training_start({}, {})
+        return cb
+
+    def check(cb, t):
+        model.num_timesteps = t
+        cb.on_rollout_end()
+        cb.on_rollout_start()
+
     # a resume at 5100 whose last check made was at 4096: the check due at 5000 was not made;
     # it is made once the session has seen a whole window (5600)
-    late = restart_rule(cfg, [1024], checked=4096)
-    late.init_callback(model)
-    model.num_timesteps = 5100
-    late.on_training_start({}, {})
-    model.num_timesteps = 5400
-    late.on_rollout_end()
-    late.on_rollout_start()
+    late = resume(5100, checked=4096)
+    check(late, 5400)
     assert late.restarts == [1024]  # not a whole window yet
-    model.num_timesteps = 5632
-    late.on_rollout_end()
-    late.on_rollout_start()
+    check(late, 5632)
     assert late.restarts == [1024, 5632] and late.checked == 5632
-    made = restart_rule(cfg, [1024], checked=5000)  # that check made before the checkpoint
-    made.init_callback(model)
-    model.num_timesteps = 5100
-    made.on_training_start({}, {})
-    model.num_timesteps = 5632
-    made.on_rollout_end()
+    made = resume(5100, checked=5000)  # that check made before the checkpoint
+    check(made, 5632)
     assert made.restarts == [1024] and made.next_check == 6000
     drawn.clear()
-    resumed = restart_rule(cfg, [1024])  # a resume at 5000: a whole window of its own first
-    resumed.init_callback(model)
-    model.num_timesteps = 5000
-    resumed.on_training_start({}, {})
-    model.num_timesteps = 6000
-    resumed.on_rollout_end()
-    resumed.on_rollout_start()
+    resumed = resume(5000)  # a resume at 5000: a whole window of its own first
+    check(resumed, 6000)
     assert drawn == [2007] and resumed.restarts == [1024, 6000]
