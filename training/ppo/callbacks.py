@@ -19,6 +19,7 @@ from training.evaluation.rollouts import run_episodes_batched
 from training.plumbing.outputs import OutDir
 from training.plumbing.safe_files import read_csv
 from training.ppo.config import (
+    MAX_RESTARTS,
     SELECTION_SEED_OFFSET,
     PPOConfig,
 )
@@ -140,8 +141,6 @@ def start_curriculum(cfg: PPOConfig, switched_at: int | None):
 
 RESTART_SEED_STRIDE = 1000
 """The k-th restart draws the network of seed + k x this."""
-MAX_RESTARTS = 100
-"""The most restarts ``[restart]`` allows (``max``)."""
 
 
 def check_restarts(restarts, where: str, max_step: int, max_count: int = MAX_RESTARTS):

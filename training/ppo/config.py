@@ -16,6 +16,9 @@ import numpy as np
 
 from biped_constraint_env.settings import with_keys
 
+MAX_RESTARTS = 100
+"""The most restarts ``[restart]`` allows (its ``max``)."""
+
 
 @dataclass
 class PPOConfig:
@@ -180,8 +183,8 @@ class PPOConfig:
             v = r[k]
             if isinstance(v, bool) or not isinstance(v, int) or not 0 < v <= 10**9:
                 raise ValueError(f"[restart] {k} must be a whole number in [1, 1e9], got {v!r}")
-        if r["max"] > 100:
-            raise ValueError(f"[restart] max must be at most 100, got {r['max']!r}")
+        if r["max"] > MAX_RESTARTS:
+            raise ValueError(f"[restart] max must be at most {MAX_RESTARTS}, got {r['max']!r}")
         for name, on in (("teacher", self.teacher), ("init_from", self.init_from),
                          ("critic_warmup", self.critic_warmup > 0)):  # fmt: skip
             if on:
