@@ -11,18 +11,29 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     """The PPO model of a config, with fresh weights.
 
     ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
+    With ``stand_std_nm`` the policy is :class:`training.ppo.exploration.StandNoisePolicy`
+    (the same weights as ``MlpPolicy``; a fixed noise on the rows commanded to stand).
     """
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import LinearSchedule
 
     policy_kwargs = cfg.policy_kwargs()
+    policy = "MlpPolicy"
+    if cfg.stand_std_nm > 0:
+        import numpy as np
+
+        from training.ppo.exploration import StandNoisePolicy
+
+        policy = StandNoisePolicy
+        gear = np.broadcast_to(np.asarray(cfg.action_map().gear, np.float64), (5,))
+        policy_kwargs["stand_log_std"] = np.log(cfg.stand_std_nm / gear).tolist()
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
     if cfg.teacher and mean is not None:
         policy_kwargs["features_extractor_kwargs"] = {"mean": list(mean), "var": list(var)}
     return PPO(
-        "MlpPolicy",
+        policy,
         vecnorm,
         n_steps=cfg.n_steps,
         batch_size=cfg.batch_size,
@@ -94,12 +105,17 @@ def training_env(
     The config's training env options (with its reference-state starts), its time limit and
     action map; ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy
     normalises its observations itself (fixed statistics), so VecNormalize normalises only the
-    returns.
+    returns. With ``stand_std_nm`` the command entry is not normalised
+    (:func:`training.ppo.exploration.pin_command`).
     """
     from stable_baselines3.common.vec_env import VecNormalize
 
     venv = _monitored_env(cfg, seed, monitor_file, env_threads)
     vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
+    if cfg.stand_std_nm > 0:
+        from training.ppo.exploration import pin_command
+
+        pin_command(vecnorm)
     return venv, vecnorm
 
 

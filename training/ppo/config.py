@@ -107,6 +107,9 @@ class PPOConfig:
     # log_std_init; the stance ankle tolerates far less noise than the hip)
     action_std_nm: float = 0.0  # > 0: initial action std [N m] on every joint (overrides
     # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
+    stand_std_nm: float = 0.0  # > 0 (task "command"): training's exploration noise [N m, every
+    # joint] on the rows commanded to stand (a zero command), fixed; the learned std elsewhere.
+    # The network then reads the command in m/s, not normalised (training.ppo.exploration)
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)
@@ -169,6 +172,22 @@ class PPOConfig:
                 raise ValueError(f"[{name}]: {e}") from None
         self._check_start_curriculum()  # on the valid training env
         self._check_restart()
+        self._check_stand_noise()
+
+    def _check_stand_noise(self) -> None:
+        """Refuse ``stand_std_nm`` without a command as the observation's last entry."""
+        if self.stand_std_nm <= 0:
+            return
+        blocks = self.settings().observation.blocks
+        if not blocks or blocks[-1] != "command":
+            raise ValueError("--stand-std-nm needs the command as the observation's last entry "
+                             "([env] task = \"command\")")  # fmt: skip
+        if self.settings().action.unit_actions:
+            raise ValueError("--stand-std-nm is a torque noise: it needs [env] action = "
+                             "\"torque\"")  # fmt: skip
+        for name, on in (("use_sde", self.use_sde), ("teacher", self.teacher)):
+            if on:
+                raise ValueError(f"--stand-std-nm does not combine with {name}")
 
     RESTART_KEYS = ("every", "window", "min_steps", "max")
 
@@ -352,7 +371,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("bc_rounds", 0, 10_000), ("bc_episodes", 0, 1_000_000), ("bc_periods0", 1, 1_000_000),
     ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
     ("bc_ankle_weight", 0.0, 1e6), ("log_std_joints", -20.0, 5.0), ("action_std_nm", 0.0, 150.0),
-    ("action_bias_nm", -150.0, 150.0),
+    ("stand_std_nm", 0.0, 150.0), ("action_bias_nm", -150.0, 150.0),
     ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
     ("stop_min_steps", 0, 100_000), ("stop_evals", 1, 1000),
 )  # fmt: skip

@@ -61,6 +61,7 @@ from training.ppo.config import (
     bc_weights,
 )
 from training.ppo.policy_io import (
+    NORMALIZER_FILE,
     POLICY_FILE,
     STATE_FILE,
     UntrustedFileError,
@@ -73,6 +74,7 @@ from training.ppo.policy_io import (
     load_weights,
     open_snapshot,
     published_snapshot,
+    read_normalizer,
     restore_normalizer,
     save_snapshot,
 )
@@ -191,12 +193,49 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
     check_weights(cfg, snap)
     model = make_model(cfg, vecnorm, fs)
     load_weights(model.policy, snap)
+    if cfg.stand_std_nm > 0:
+        _command_in_m_s(src, snap, cfg, model.policy)
     restore_normalizer(vecnorm, snap)
     digest = hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
     run.write("init_from.json", json_text({"policy": str(src), "snapshot": which,
                                            "policy_sha256": digest}))  # fmt: skip
     print(f"starting PPO from {src} ({which}/, weights sha256 {digest[:12]})", flush=True)
     return model
+
+
+def _command_in_m_s(src: Path, snap, cfg: PPOConfig, policy) -> None:
+    """A ``stand_std_nm`` run's start, made to read the command in m/s (in place).
+
+    Such a run feeds the network the command unnormalised (mean 0, variance 1 in its
+    normaliser). A start whose normaliser held other statistics for it has them folded into its
+    first layers (:func:`training.ppo.exploration.fold_command_input`), exact where no command
+    the observation allows was clipped; one whose command mean is exactly 0 (pinned, or every
+    command it saw was 0) read 0 at a zero command as this run does. Refused otherwise.
+    """
+    from biped_constraint_env.command import MAX_COMMAND_M_S
+    from training.ppo.exploration import fold_command_input
+
+    raw = snap.files.get(NORMALIZER_FILE)
+    if raw is None:
+        raise UntrustedFileError(f"{snap.name(NORMALIZER_FILE)}: missing")
+    d = read_normalizer(snap.name(NORMALIZER_FILE), cfg.obs_dim(), raw)
+    if not d["norm_obs"]:
+        raise UntrustedFileError(f"{snap.name(NORMALIZER_FILE)}: holds no observation statistics")
+    mean, var = float(d["obs_mean"][-1]), float(d["obs_var"][-1])
+    if mean == 0.0:  # pinned, or every command it saw was 0: it read 0 there, as this run does
+        return
+    widest = (MAX_COMMAND_M_S + abs(mean)) / np.sqrt(var + d["epsilon"])
+    if var == 0.0 or widest >= d["clip_obs"]:
+        raise Refusal(f"train_ppo: error: --stand-std-nm feeds the network the command in m/s; "
+                      f"{src}'s network read it normalised and clipped (mean {mean:.3g}, "
+                      f"variance {var:.3g}): start from a random network or another "
+                      f"run")  # fmt: skip
+    fold_command_input(policy, mean, var, d["epsilon"])
+    print(
+        f"the start's command input (normalised by mean {mean:.3f}, variance {var:.3f}) "
+        f"folded into its first layers: the network reads m/s",
+        flush=True,
+    )
 
 
 def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool) -> int:
