@@ -9,18 +9,18 @@ import torch
 from gymnasium import spaces
 
 from training.ppo.config import PPOConfig
-from training.ppo.exploration import PinnedStats, StandNoisePolicy
+from training.ppo.exploration import HIP_VY, PinnedStats, StandNoisePolicy
 
 COMMAND = {"env": {"task": "command", "action": "torque"}}
 
 
-def _policy(stand_nm=0.5, log_std=-3.0):
+def _policy(stand_nm=0.5, log_std=-3.0, speed=0.0):
     obs = spaces.Box(-np.inf, np.inf, (27,), np.float32)
     act = spaces.Box(-1.0, 1.0, (5,), np.float32)
     stand = np.log(np.full(5, stand_nm / 150.0)).tolist()
     torch.manual_seed(0)
     return StandNoisePolicy(obs, act, lambda _: 1e-3, net_arch=[16, 16], log_std_init=log_std,
-                            stand_log_std=stand)  # fmt: skip
+                            stand_log_std=stand, stand_speed=speed)  # fmt: skip
 
 
 def test_rows_commanded_to_stand_get_the_fixed_noise_and_the_others_the_learned_one():
@@ -34,6 +34,17 @@ def test_rows_commanded_to_stand_get_the_fixed_noise_and_the_others_the_learned_
     assert std[~stand] == pytest.approx(np.full((3, 5), np.exp(-3.0)), rel=1e-5)
     # the mean is the network's, whatever the noise
     assert torch.allclose(dist.mean, policy.action_net(policy.mlp_extractor.forward_actor(obs)))
+
+
+def test_with_a_speed_gate_only_slow_rows_commanded_to_stand_get_the_fixed_noise():
+    policy = _policy(speed=0.2)
+    obs = torch.randn(5, 27)
+    obs[:, -1] = torch.tensor([0.0, 0.0, 0.0, 1.0, 0.0])
+    obs[:, HIP_VY] = torch.tensor([0.1, -0.15, 0.8, 0.0, -0.3])
+    std = policy.get_distribution(obs).distribution.stddev.detach().numpy()[:, 0]
+    small = np.isclose(std, 0.5 / 150.0, rtol=1e-5)
+    assert small.tolist() == [True, True, False, False, False]
+    assert np.allclose(std[~small], np.exp(-3.0), rtol=1e-5)
 
 
 def test_rollout_and_update_compute_the_same_log_probability():
@@ -78,7 +89,7 @@ def test_its_weights_are_an_mlp_policys():
 
 
 def test_pinned_statistics_hold_the_command_entry_at_the_identity():
-    stats = PinnedStats((4,), -1)
+    stats = PinnedStats((4,), [-1])
     rng = np.random.default_rng(0)
     for _ in range(3):
         stats.update(rng.normal(3.0, 2.0, (50, 4)))
@@ -103,6 +114,8 @@ def test_the_option_is_refused_where_it_means_nothing(extra, match):
     with pytest.raises(ValueError, match=match):
         cfg.validate()
     PPOConfig(stand_std_nm=0.5, **COMMAND).validate()
+    with pytest.raises(ValueError, match="goes with"):
+        PPOConfig(stand_speed_m_s=0.2, **COMMAND).validate()
 
 
 def test_a_run_feeds_the_command_in_m_s_saves_an_mlp_policy_and_refuses_a_normalised_start(
@@ -117,8 +130,9 @@ def test_a_run_feeds_the_command_in_m_s_saves_an_mlp_policy_and_refuses_a_normal
     assert train_ppo.main([*flags, "--out-dir", str(tmp_path / "a")]) == 0
     (run,) = (tmp_path / "a" / "train_ppo").iterdir()
     d = read_normalizer(run / "final" / "normalizer.npz")
-    assert d["obs_mean"][-1] == 0.0 and d["obs_var"][-1] == 1.0  # the command in m/s
-    assert np.all(d["obs_var"][:-1] != 1.0)  # the other entries normalised as ever
+    pinned = np.flatnonzero((d["obs_mean"] == 0.0) & (d["obs_var"] == 1.0))
+    assert pinned.tolist() == [HIP_VY, 26]  # the hip speed and the command in m/s; the rest
+    # normalised as ever
     policy, norm, cfg, _ = load_policy(run, "final")  # a plain MlpPolicy, loaded as any
     assert cfg.stand_std_nm == 0.5 and type(policy).__name__ == "ActorCriticPolicy"
     obs = np.zeros((1, 27), np.float32)
@@ -152,11 +166,13 @@ def test_a_start_that_read_the_command_normalised_is_folded_exactly_or_refused(t
     (run,) = (tmp_path / "a" / "train_ppo").iterdir()
     new, new_norm, cfg, _ = load_policy(run, "final")
     old, old_norm, _, _ = load_policy(src)
-    assert new_norm.mean[-1] == 0.0 and new_norm.var[-1] == 1.0
-    assert old_norm.var[-1] > 0.1  # it did read the command normalised
+    for i in (HIP_VY, -1):
+        assert new_norm.mean[i] == 0.0 and new_norm.var[i] == 1.0
+        assert old_norm.var[i] > 0.1  # it did read them normalised
     rng = np.random.default_rng(0)
     obs = rng.normal(0.0, 1.0, (64, 27)).astype(np.float32) * np.sqrt(old_norm.var) + old_norm.mean
     obs[:, -1] = rng.uniform(0.0, 2.0, 64)
+    obs[:, HIP_VY] = rng.uniform(-7.9, 7.9, 64)  # within the bound the fold passes unclipped
     obs[::4, -1] = 0.0
     a_new = policy_batch_actor(new, new_norm, cfg)(obs)
     a_old = policy_batch_actor(old, old_norm, cfg)(obs)
@@ -171,5 +187,5 @@ def test_a_start_that_read_the_command_normalised_is_folded_exactly_or_refused(t
     data["obs_var"][-1] = 0.01  # (5 m/s - mean) / 0.1 beyond the clip at 10
     np.savez(npz, **data)
     write_manifest(bad / which)  # a consistent snapshot, of a network that cannot be folded
-    with pytest.raises(SystemExit, match="normalised and clipped"):
+    with pytest.raises(SystemExit, match="clipped below 5.0"):
         train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(bad)])

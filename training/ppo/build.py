@@ -27,6 +27,7 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         policy = StandNoisePolicy
         gear = np.broadcast_to(np.asarray(cfg.action_map().gear, np.float64), (5,))
         policy_kwargs["stand_log_std"] = np.log(cfg.stand_std_nm / gear).tolist()
+        policy_kwargs["stand_speed"] = cfg.stand_speed_m_s
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
@@ -105,7 +106,7 @@ def training_env(
     The config's training env options (with its reference-state starts), its time limit and
     action map; ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy
     normalises its observations itself (fixed statistics), so VecNormalize normalises only the
-    returns. With ``stand_std_nm`` the command entry is not normalised
+    returns. With ``stand_std_nm`` the command and the hip speed are not normalised
     (:func:`training.ppo.exploration.pin_command`).
     """
     from stable_baselines3.common.vec_env import VecNormalize

@@ -109,7 +109,10 @@ class PPOConfig:
     # log_std_init; the std of joint j is action_std_nm / gear_j in action units)
     stand_std_nm: float = 0.0  # > 0 (task "command"): training's exploration noise [N m, every
     # joint] on the rows commanded to stand (a zero command), fixed; the learned std elsewhere.
-    # The network then reads the command in m/s, not normalised (training.ppo.exploration)
+    # The network then reads the command and the hip's forward speed in m/s, not normalised
+    # (training.ppo.exploration)
+    stand_speed_m_s: float = 0.0  # > 0: that noise only where the hip's forward speed is also
+    # below this [m/s] (a walk told to stop keeps the learned noise until it has slowed down)
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)
@@ -177,6 +180,8 @@ class PPOConfig:
     def _check_stand_noise(self) -> None:
         """Refuse ``stand_std_nm`` without a command as the observation's last entry."""
         if self.stand_std_nm <= 0:
+            if self.stand_speed_m_s > 0:
+                raise ValueError("--stand-speed-m-s goes with --stand-std-nm")
             return
         blocks = self.settings().observation.blocks
         if not blocks or blocks[-1] != "command":
@@ -371,7 +376,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("bc_rounds", 0, 10_000), ("bc_episodes", 0, 1_000_000), ("bc_periods0", 1, 1_000_000),
     ("bc_periods", 1, 1_000_000), ("bc_grad_steps", 0, _BIG), ("bc_lr", 0.0, 1.0),
     ("bc_ankle_weight", 0.0, 1e6), ("log_std_joints", -20.0, 5.0), ("action_std_nm", 0.0, 150.0),
-    ("stand_std_nm", 0.0, 150.0), ("action_bias_nm", -150.0, 150.0),
+    ("stand_std_nm", 0.0, 150.0), ("stand_speed_m_s", 0.0, 10.0), ("action_bias_nm", -150.0, 150.0),
     ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
     ("stop_min_steps", 0, 100_000), ("stop_evals", 1, 1000),
 )  # fmt: skip

@@ -4,19 +4,20 @@ A joint PD law holds the standing start for 8 s under 0.3 N m of Gaussian torque
 joint in 19 of 20 episodes, under 1 N m in 12 of 20 and under 3 N m in none
 (``results/command_stage4/README.md``); PPO's exploration noise on a walker is 1-5 N m. So with
 one noise for every state, no standing episode lasts long enough for PPO to sample standing
-still. ``PPOConfig.stand_std_nm`` > 0 gives the rows whose commanded speed is zero their own
-fixed noise (that std in N m at every joint); the other rows keep the policy's learned std.
+still. ``PPOConfig.stand_std_nm`` > 0 gives the rows whose commanded speed is zero (and, with
+``stand_speed_m_s`` > 0, whose hip moves forward or back slower than that) their own fixed
+noise (that std in N m at every joint); the other rows keep the policy's learned std.
 
 Two parts, both for training only (the published network is a plain ``MlpPolicy``: its
 deterministic action is the mean, which this does not touch):
 
-* :class:`PinnedStats`: VecNormalize's observation statistics with the command entry held at
-  mean 0 and variance 1, so that the network reads the command in m/s and a zero command is an
-  exact 0 in the normalised observation (the saved normaliser says so, and the run-time actor
-  computes the same input).
+* :class:`PinnedStats`: VecNormalize's observation statistics with the command and the hip's
+  forward speed (:data:`PINNED`) held at mean 0 and variance 1, so that the network reads both
+  in m/s and the rows are told apart exactly in the normalised observation (the saved
+  normaliser says so, and the run-time actor computes the same input).
 * :class:`StandNoisePolicy`: SB3's ``ActorCriticPolicy`` whose Gaussian has, row by row, the
-  fixed log-std ``stand_log_std`` where the command entry is 0. Rollout and update compute the
-  same distribution from the same stored observation, so PPO's ratio stays exact.
+  fixed log-std ``stand_log_std`` on those rows. Rollout and update compute the same
+  distribution from the same stored observation, so PPO's ratio stays exact.
 """
 
 from __future__ import annotations
@@ -26,22 +27,31 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 
+from biped_constraint_env.command import MAX_COMMAND_M_S
+from biped_constraint_env.observation import OBS_NAMES
 
-def _pinned(v, index: int, value: float) -> np.ndarray:
+HIP_VY = OBS_NAMES.index("hip_vy")
+PINNED = {-1: MAX_COMMAND_M_S, HIP_VY: 8.0}
+"""The entries read in m/s (index: the largest magnitude a fold must pass unclipped): the
+command (the observation's last entry), and the hip's forward speed (a walk or a fall here
+stays well below 8 m/s)."""
+
+
+def _pinned(v, indices: list[int], value: float) -> np.ndarray:
     v = np.array(v, dtype=np.float64)  # a copy: never the caller's array
-    v[index] = value
+    v[indices] = value
     return v
 
 
 class PinnedStats(RunningMeanStd):
-    """Running mean and variance with one entry held at mean 0 and variance 1 (the identity).
+    """Running mean and variance with some entries held at mean 0 and variance 1 (identity).
 
     Every assignment to ``mean`` or ``var`` (SB3's update, a restored snapshot) is pinned.
     """
 
-    def __init__(self, shape: tuple[int, ...], index: int):
-        """``index``: the entry held (negative counts from the end)."""
-        self._index = index
+    def __init__(self, shape: tuple[int, ...], indices):
+        """``indices``: the entries held (negative count from the end)."""
+        self._index = list(indices)
         super().__init__(shape=shape)
 
     @property
@@ -63,10 +73,10 @@ class PinnedStats(RunningMeanStd):
         self._var = _pinned(v, self._index, 1.0)
 
 
-def pin_command(vecnorm, index: int = -1) -> None:
-    """Hold the command entry of ``vecnorm``'s observation statistics at the identity."""
+def pin_command(vecnorm) -> None:
+    """Hold the :data:`PINNED` entries of ``vecnorm``'s observation statistics at the identity."""
     old = vecnorm.obs_rms
-    stats = PinnedStats(old.mean.shape, index)
+    stats = PinnedStats(old.mean.shape, list(PINNED))
     stats.mean, stats.var, stats.count = old.mean, old.var, old.count
     vecnorm.obs_rms = stats
 
@@ -74,14 +84,14 @@ def pin_command(vecnorm, index: int = -1) -> None:
 class StandNoisePolicy(ActorCriticPolicy):
     """``ActorCriticPolicy`` with a fixed exploration noise on rows commanded to stand.
 
-    ``stand_log_std``: the log-std (action units, one per action) where the command entry
-    (``command_index`` of the normalised observation, pinned to the identity by
-    :func:`pin_command`) is exactly 0; elsewhere the policy's own learned ``log_std``. The
-    weights and their names are ``ActorCriticPolicy``'s (the log-std at a zero command is a
-    setting, not a weight).
+    ``stand_log_std``: the log-std (action units, one per action) where the command (the last
+    entry of the normalised observation, pinned to the identity by :func:`pin_command`) is
+    exactly 0 and, with ``stand_speed`` > 0, the hip's forward speed (pinned too) is below it
+    in magnitude; elsewhere the policy's own learned ``log_std``. The weights and their names
+    are ``ActorCriticPolicy``'s (the noise on those rows is a setting, not a weight).
     """
 
-    def __init__(self, *args, stand_log_std=(), command_index: int = -1, **kwargs):
+    def __init__(self, *args, stand_log_std=(), stand_speed: float = 0.0, **kwargs):
         super().__init__(*args, **kwargs)
         if self.use_sde:
             raise ValueError("stand_std_nm does not combine with use_sde")
@@ -90,11 +100,18 @@ class StandNoisePolicy(ActorCriticPolicy):
             raise ValueError(f"stand_log_std needs {self.action_space.shape[0]} values, "
                              f"got {tuple(stand.shape)}")  # fmt: skip
         self.register_buffer("stand_log_std", stand, persistent=False)
-        self.command_index = command_index
+        self.stand_speed = float(stand_speed)
         self._stand: torch.Tensor | None = None
 
+    def stand_rows(self, obs: torch.Tensor) -> torch.Tensor:
+        """The rows of ``obs`` (normalised, :data:`PINNED` entries in m/s) given the fixed noise."""
+        rows = obs[..., -1] == 0
+        if self.stand_speed > 0:
+            rows &= obs[..., HIP_VY].abs() < self.stand_speed
+        return rows
+
     def _with_stand(self, obs, fn):
-        self._stand = obs[..., self.command_index] == 0
+        self._stand = self.stand_rows(obs)
         try:
             return fn()
         finally:
@@ -123,19 +140,34 @@ class StandNoisePolicy(ActorCriticPolicy):
         return self.action_dist.proba_distribution(mean, log_std)
 
 
-def fold_command_input(policy, mean: float, var: float, eps: float) -> None:
-    """Make a network that read the command normalised read it in m/s, exactly (in place).
+def fold_pinned_inputs(policy, mean: np.ndarray, var: np.ndarray, eps: float, clip: float) -> list:
+    """Make a network that read the :data:`PINNED` entries normalised read them in m/s (in place).
 
-    Its first layers (actor and critic) saw ``(c - mean) / sqrt(var + eps)``; with the weights
-    of that input divided by the scale and the bias moved by ``-w mean / scale``, they compute
-    the same from ``c`` itself. Exact where the old input was not clipped (the caller checks).
+    Its first layers (actor and critic) saw ``(x - mean) / sqrt(var + eps)`` there; with those
+    inputs' weights divided by the scale and the bias moved by ``-w mean / scale``, they compute
+    the same from ``x`` itself: exactly, wherever the old input was not clipped, which holds
+    for every value up to the entry's bound in :data:`PINNED` (else ValueError, nothing
+    changed). An entry whose mean is exactly 0 (pinned already, or only ever 0: every command
+    a zero) is left as it is. Returns the entries folded.
     """
-    scale = float(np.sqrt(var + eps))
-    for net in (policy.mlp_extractor.policy_net, policy.mlp_extractor.value_net):
-        first = net[0] if len(net) else None
-        if not isinstance(first, torch.nn.Linear):
-            raise ValueError("the network has no first linear layer to take the command")
-        with torch.no_grad():
-            w = first.weight[:, -1].clone()
-            first.weight[:, -1] = w / scale
-            first.bias -= w * (mean / scale)
+    todo = []
+    for i, bound in PINNED.items():
+        if mean[i] == 0.0:
+            continue
+        scale = float(np.sqrt(var[i] + eps))
+        if (bound + abs(mean[i])) / scale >= clip:
+            raise ValueError(f"observation entry {i} was normalised by mean {mean[i]:.3g}, "
+                             f"variance {var[i]:.3g} and clipped below {bound} in "
+                             f"magnitude")  # fmt: skip
+        todo.append((i, float(mean[i]), scale))
+    nets = (policy.mlp_extractor.policy_net, policy.mlp_extractor.value_net)
+    firsts = [net[0] if len(net) else None for net in nets]
+    if todo and not all(isinstance(f, torch.nn.Linear) for f in firsts):
+        raise ValueError("the network has no first linear layers to take the inputs")
+    with torch.no_grad():
+        for first in firsts if todo else ():
+            for i, m, scale in todo:
+                w = first.weight[:, i].clone()
+                first.weight[:, i] = w / scale
+                first.bias -= w * (m / scale)
+    return [i for i, _, _ in todo]

@@ -204,16 +204,14 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
 
 
 def _command_in_m_s(src: Path, snap, cfg: PPOConfig, policy) -> None:
-    """A ``stand_std_nm`` run's start, made to read the command in m/s (in place).
+    """A ``stand_std_nm`` run's start, made to read the command and hip speed in m/s (in place).
 
-    Such a run feeds the network the command unnormalised (mean 0, variance 1 in its
-    normaliser). A start whose normaliser held other statistics for it has them folded into its
-    first layers (:func:`training.ppo.exploration.fold_command_input`), exact where no command
-    the observation allows was clipped; one whose command mean is exactly 0 (pinned, or every
-    command it saw was 0) read 0 at a zero command as this run does. Refused otherwise.
+    Such a run feeds the network those entries unnormalised (mean 0, variance 1 in its
+    normaliser); a start whose normaliser held other statistics for them has them folded into
+    its first layers, exactly (:func:`training.ppo.exploration.fold_pinned_inputs`), or is
+    refused where its input was clipped.
     """
-    from biped_constraint_env.command import MAX_COMMAND_M_S
-    from training.ppo.exploration import fold_command_input
+    from training.ppo.exploration import fold_pinned_inputs
 
     raw = snap.files.get(NORMALIZER_FILE)
     if raw is None:
@@ -221,21 +219,16 @@ def _command_in_m_s(src: Path, snap, cfg: PPOConfig, policy) -> None:
     d = read_normalizer(snap.name(NORMALIZER_FILE), cfg.obs_dim(), raw)
     if not d["norm_obs"]:
         raise UntrustedFileError(f"{snap.name(NORMALIZER_FILE)}: holds no observation statistics")
-    mean, var = float(d["obs_mean"][-1]), float(d["obs_var"][-1])
-    if mean == 0.0:  # pinned, or every command it saw was 0: it read 0 there, as this run does
-        return
-    widest = (MAX_COMMAND_M_S + abs(mean)) / np.sqrt(var + d["epsilon"])
-    if var == 0.0 or widest >= d["clip_obs"]:
-        raise Refusal(f"train_ppo: error: --stand-std-nm feeds the network the command in m/s; "
-                      f"{src}'s network read it normalised and clipped (mean {mean:.3g}, "
-                      f"variance {var:.3g}): start from a random network or another "
-                      f"run")  # fmt: skip
-    fold_command_input(policy, mean, var, d["epsilon"])
-    print(
-        f"the start's command input (normalised by mean {mean:.3f}, variance {var:.3f}) "
-        f"folded into its first layers: the network reads m/s",
-        flush=True,
-    )
+    try:
+        folded = fold_pinned_inputs(policy, d["obs_mean"], d["obs_var"], d["epsilon"],
+                                    d["clip_obs"])  # fmt: skip
+    except ValueError as e:
+        raise Refusal(f"train_ppo: error: --stand-std-nm feeds the network the command and the "
+                      f"hip speed in m/s; {src}: {e}: start from a random network or another "
+                      f"run") from None  # fmt: skip
+    if folded:
+        print(f"the start's normalised inputs {folded} folded into its first layers: the "
+              f"network reads them in m/s", flush=True)  # fmt: skip
 
 
 def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool) -> int:
