@@ -114,8 +114,9 @@ def test_the_option_is_refused_where_it_means_nothing(extra, match):
     with pytest.raises(ValueError, match=match):
         cfg.validate()
     PPOConfig(stand_std_nm=0.5, **COMMAND).validate()
-    with pytest.raises(ValueError, match="goes with"):
-        PPOConfig(stand_speed_m_s=0.2, **COMMAND).validate()
+    for alone in ({"stand_speed_m_s": 0.2}, {"stand_balance": True}):
+        with pytest.raises(ValueError, match="go with --stand-std-nm"):
+            PPOConfig(**alone, **COMMAND).validate()
 
 
 def test_a_run_feeds_the_command_in_m_s_saves_an_mlp_policy_and_refuses_a_normalised_start(
@@ -189,3 +190,30 @@ def test_a_start_that_read_the_command_normalised_is_folded_exactly_or_refused(t
     write_manifest(bad / which)  # a consistent snapshot, of a network that cannot be folded
     with pytest.raises(SystemExit, match="clipped below 5.0"):
         train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(bad)])
+
+
+def test_the_balance_scales_only_the_standing_rows_advantages_by_their_noise_ratio():
+    from types import SimpleNamespace
+
+    from training.ppo.exploration import stand_balance_callback
+
+    policy = _policy(speed=0.2)  # stand noise 0.5 N m, learned exp(-3) x 150 = 7.5 N m
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(4, 3, 27)).astype(np.float32)
+    obs[..., -1] = 1.0
+    obs[0, :, -1] = 0.0  # commanded to stand ...
+    obs[0, :, HIP_VY] = [0.1, 0.5, -0.05]  # ... and slow in two of three rows
+    adv = rng.normal(size=(4, 3)).astype(np.float32)
+    buf = SimpleNamespace(observations=obs, advantages=adv.copy())
+    cb = stand_balance_callback()
+    logged = {}
+    logger = SimpleNamespace(record=lambda k, v: logged.update({k: v}))
+    cb.init_callback(SimpleNamespace(policy=policy, rollout_buffer=buf, logger=logger))
+    cb.on_rollout_end()
+    scale = (0.5 / 150.0) / np.exp(-3.0)
+    want = adv.copy()
+    want[0, [0, 2]] *= scale
+    assert buf.advantages == pytest.approx(want, rel=1e-5)
+    assert logged == pytest.approx(
+        {"train/stand_rows": 2 / 12, "train/stand_advantage_scale": scale}
+    )

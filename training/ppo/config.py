@@ -113,6 +113,9 @@ class PPOConfig:
     # (training.ppo.exploration)
     stand_speed_m_s: float = 0.0  # > 0: that noise only where the hip's forward speed is also
     # below this [m/s] (a walk told to stop keeps the learned noise until it has slowed down)
+    stand_balance: bool = False  # with stand_std_nm: those rows' advantages scaled by their
+    # std over the learned std (geometric mean over joints), so that a row's pull on the
+    # network's mean does not grow as its noise shrinks (training.ppo.exploration)
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)
@@ -180,8 +183,8 @@ class PPOConfig:
     def _check_stand_noise(self) -> None:
         """Refuse ``stand_std_nm`` without a command as the observation's last entry."""
         if self.stand_std_nm <= 0:
-            if self.stand_speed_m_s > 0:
-                raise ValueError("--stand-speed-m-s goes with --stand-std-nm")
+            if self.stand_speed_m_s > 0 or self.stand_balance:
+                raise ValueError("--stand-speed-m-s and --stand-balance go with --stand-std-nm")
             return
         blocks = self.settings().observation.blocks
         if not blocks or blocks[-1] != "command":

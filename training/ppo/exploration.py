@@ -171,3 +171,33 @@ def fold_pinned_inputs(policy, mean: np.ndarray, var: np.ndarray, eps: float, cl
                 first.weight[:, i] = w / scale
                 first.bias -= w * (m / scale)
     return [i for i, _, _ in todo]
+
+
+def stand_balance_callback():
+    """A callback: after each rollout, the standing rows' advantages scaled down to the others'.
+
+    PPO's gradient of a row's log-probability with respect to its action mean is
+    ``(a - mean) / std**2``, of size ``1 / std``: rows with the fixed small noise pull the shared
+    network about ``learned std / stand std`` times harder than the others. Their advantages
+    (after GAE, before SB3 normalises each minibatch) are multiplied by the geometric mean over
+    the joints of ``stand std / learned std`` at that rollout, so that every row's pull on the
+    mean is of one size (the natural-gradient scaling of a Gaussian's mean). The value targets
+    are unchanged.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class StandBalance(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            policy, buf = self.model.policy, self.model.rollout_buffer
+            with torch.no_grad():
+                obs = torch.as_tensor(buf.observations.reshape(-1, buf.observations.shape[-1]))
+                rows = policy.stand_rows(obs).numpy().reshape(buf.advantages.shape)
+                factor = float(torch.exp((policy.stand_log_std - policy.log_std).mean()))
+            buf.advantages[rows] *= factor
+            self.logger.record("train/stand_rows", float(rows.mean()))
+            self.logger.record("train/stand_advantage_scale", factor)
+
+    return StandBalance()

@@ -320,6 +320,11 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                 **({"restarts": list(redraw.restarts), "restart_checked": redraw.checked}
                    if redraw else {})}  # fmt: skip
 
+    balance = None
+    if cfg.stand_balance:
+        from training.ppo.exploration import stand_balance_callback
+
+        balance = stand_balance_callback()
     callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak,
                               more_state)  # fmt: skip
     callback.stopped = stopped
@@ -335,6 +340,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                     *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0 else []),
                     *([curriculum] if curriculum else []),
                     *([redraw] if redraw else []),
+                    *([balance] if balance else []),
                     *([progress_bar(cfg)] if cfg.progress else []),
                 ],
                 reset_num_timesteps=start == 0,
