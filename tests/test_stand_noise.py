@@ -107,6 +107,8 @@ def test_pinned_statistics_hold_the_command_entry_at_the_identity():
         ({"env": {"task": "walk"}}, "command as the observation's last entry"),
         ({"env": {"task": "command", "action": "pd"}}, "torque"),
         ({**COMMAND, "use_sde": True}, "use_sde"),
+        ({**COMMAND, "target_kl": 0.02}, "target_kl"),
+        ({**COMMAND, "train_env": {"task": "walk"}}, "command as the observation's last entry"),
     ],
 )
 def test_the_option_is_refused_where_it_means_nothing(extra, match):
@@ -114,6 +116,8 @@ def test_the_option_is_refused_where_it_means_nothing(extra, match):
     with pytest.raises(ValueError, match=match):
         cfg.validate()
     PPOConfig(stand_std_nm=0.5, **COMMAND).validate()
+    with pytest.raises(ValueError, match="at least 1e-3"):
+        PPOConfig(stand_std_nm=1e-6, **COMMAND).validate()
     for alone in ({"stand_speed_m_s": 0.2}, {"stand_balance": True}):
         with pytest.raises(ValueError, match="go with --stand-std-nm"):
             PPOConfig(**alone, **COMMAND).validate()
@@ -144,6 +148,10 @@ def test_a_run_feeds_the_command_in_m_s_saves_an_mlp_policy_and_refuses_a_normal
     assert rc == 0
     (run_b,) = (tmp_path / "b" / "train_ppo").iterdir()
     assert json.loads((run_b / "init_from.json").read_text())["policy"] == str(run)
+    # a run without the option would let those inputs drift from m/s: refused
+    plain = [f for f in flags if f not in ("--stand-std-nm", "0.5")]
+    with pytest.raises(SystemExit, match="give --stand-std-nm to this run too"):
+        train_ppo.main([*plain, "--out-dir", str(tmp_path / "p"), "--init-from", str(run)])
 
 
 def test_a_start_that_read_the_command_normalised_is_folded_exactly_or_refused(tmp_path):
@@ -208,10 +216,12 @@ def test_the_balance_scales_only_the_standing_rows_advantages_by_their_noise_rat
     cb = stand_balance_callback()
     logged = {}
     logger = SimpleNamespace(record=lambda k, v: logged.update({k: v}))
-    cb.init_callback(SimpleNamespace(policy=policy, rollout_buffer=buf, logger=logger))
+    model = SimpleNamespace(policy=policy, rollout_buffer=buf, logger=logger,
+                            normalize_advantage=False)  # fmt: skip
+    cb.init_callback(model)
     cb.on_rollout_end()
     scale = (0.5 / 150.0) / np.exp(-3.0)
-    want = adv.copy()
+    want = (adv - adv.mean()) / (adv.std() + 1e-8)  # normalised over the rollout, then scaled
     want[0, [0, 2]] *= scale
     assert buf.advantages == pytest.approx(want, rel=1e-5)
     assert logged == pytest.approx(

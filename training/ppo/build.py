@@ -28,6 +28,7 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         gear = np.broadcast_to(np.asarray(cfg.action_map().gear, np.float64), (5,))
         policy_kwargs["stand_log_std"] = np.log(cfg.stand_std_nm / gear).tolist()
         policy_kwargs["stand_speed"] = cfg.stand_speed_m_s
+    extra = {"normalize_advantage": False} if cfg.stand_balance else {}  # the callback does it
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
@@ -52,6 +53,7 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         device="cpu",
         tensorboard_log=str(run / "tb"),
         verbose=0,
+        **extra,
     )
 
 

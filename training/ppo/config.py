@@ -186,14 +186,22 @@ class PPOConfig:
             if self.stand_speed_m_s > 0 or self.stand_balance:
                 raise ValueError("--stand-speed-m-s and --stand-balance go with --stand-std-nm")
             return
-        blocks = self.settings().observation.blocks
-        if not blocks or blocks[-1] != "command":
-            raise ValueError("--stand-std-nm needs the command as the observation's last entry "
-                             "([env] task = \"command\")")  # fmt: skip
-        if self.settings().action.unit_actions:
-            raise ValueError("--stand-std-nm is a torque noise: it needs [env] action = "
-                             "\"torque\"")  # fmt: skip
-        for name, on in (("use_sde", self.use_sde), ("teacher", self.teacher)):
+        if self.stand_std_nm < 1e-3:
+            raise ValueError(f"--stand-std-nm must be 0 (off) or at least 1e-3 N m, got "
+                             f"{self.stand_std_nm!r}")  # fmt: skip
+        from biped_constraint_env.settings import make_settings
+
+        for s in (self.settings(), make_settings(**self.train_env_kwargs())):
+            blocks = s.observation.blocks
+            if not blocks or blocks[-1] != "command":
+                raise ValueError("--stand-std-nm needs the command as the observation's last "
+                                 "entry ([env] task = \"command\")")  # fmt: skip
+            if s.action.unit_actions:
+                raise ValueError("--stand-std-nm is a torque noise: it needs [env] action = "
+                                 "\"torque\"")  # fmt: skip
+        for name, on in (("use_sde", self.use_sde), ("teacher", self.teacher),
+                         ("target_kl (the standing rows' small noise would dominate the KL)",
+                          self.target_kl > 0)):  # fmt: skip
             if on:
                 raise ValueError(f"--stand-std-nm does not combine with {name}")
 

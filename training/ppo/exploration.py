@@ -105,6 +105,7 @@ class StandNoisePolicy(ActorCriticPolicy):
 
     def stand_rows(self, obs: torch.Tensor) -> torch.Tensor:
         """The rows of ``obs`` (normalised, :data:`PINNED` entries in m/s) given the fixed noise."""
+        obs = obs.float()  # the network's own input dtype, whichever the caller passes
         rows = obs[..., -1] == 0
         if self.stand_speed > 0:
             rows &= obs[..., HIP_VY].abs() < self.stand_speed
@@ -147,12 +148,13 @@ def fold_pinned_inputs(policy, mean: np.ndarray, var: np.ndarray, eps: float, cl
     inputs' weights divided by the scale and the bias moved by ``-w mean / scale``, they compute
     the same from ``x`` itself: exactly, wherever the old input was not clipped, which holds
     for every value up to the entry's bound in :data:`PINNED` (else ValueError, nothing
-    changed). An entry whose mean is exactly 0 (pinned already, or only ever 0: every command
-    a zero) is left as it is. Returns the entries folded.
+    changed). Left as it is: an entry pinned already (mean 0, variance 1), or one that was only
+    ever 0 (mean 0, variance below 1e-6: every command a zero), which read 0 there as the run
+    will. Returns the entries folded.
     """
     todo = []
     for i, bound in PINNED.items():
-        if mean[i] == 0.0:
+        if mean[i] == 0.0 and (var[i] == 1.0 or var[i] < 1e-6):
             continue
         scale = float(np.sqrt(var[i] + eps))
         if (bound + abs(mean[i])) / scale >= clip:
@@ -178,11 +180,12 @@ def stand_balance_callback():
 
     PPO's gradient of a row's log-probability with respect to its action mean is
     ``(a - mean) / std**2``, of size ``1 / std``: rows with the fixed small noise pull the shared
-    network about ``learned std / stand std`` times harder than the others. Their advantages
-    (after GAE, before SB3 normalises each minibatch) are multiplied by the geometric mean over
-    the joints of ``stand std / learned std`` at that rollout, so that every row's pull on the
-    mean is of one size (the natural-gradient scaling of a Gaussian's mean). The value targets
-    are unchanged.
+    network about ``learned std / stand std`` times harder than the others. The rollout's
+    advantages (after GAE) are normalised over the whole rollout, then the standing rows' are
+    multiplied by the geometric mean over the joints of ``stand std / learned std`` at that
+    rollout, so that every row's pull on the mean is of about one size. The model must not
+    normalise advantages again per minibatch (:func:`training.ppo.build.make_model` turns SB3's
+    ``normalize_advantage`` off with this option). The value targets are unchanged.
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -192,11 +195,15 @@ def stand_balance_callback():
 
         def _on_rollout_end(self) -> None:
             policy, buf = self.model.policy, self.model.rollout_buffer
+            if getattr(self.model, "normalize_advantage", False):
+                raise RuntimeError("stand_balance: SB3 would normalise each minibatch again")
             with torch.no_grad():
                 obs = torch.as_tensor(buf.observations.reshape(-1, buf.observations.shape[-1]))
                 rows = policy.stand_rows(obs).numpy().reshape(buf.advantages.shape)
                 factor = float(torch.exp((policy.stand_log_std - policy.log_std).mean()))
-            buf.advantages[rows] *= factor
+            adv = buf.advantages
+            adv[...] = (adv - adv.mean()) / (adv.std() + 1e-8)
+            adv[rows] *= factor
             self.logger.record("train/stand_rows", float(rows.mean()))
             self.logger.record("train/stand_advantage_scale", factor)
 

@@ -74,6 +74,7 @@ from training.ppo.policy_io import (
     load_weights,
     open_snapshot,
     published_snapshot,
+    read_config,
     read_normalizer,
     restore_normalizer,
     save_snapshot,
@@ -195,12 +196,24 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
     load_weights(model.policy, snap)
     if cfg.stand_std_nm > 0:
         _command_in_m_s(src, snap, cfg, model.policy)
+    elif _stand_trained(src):
+        raise Refusal(f"train_ppo: error: --init-from: {src} was trained with --stand-std-nm: "
+                      f"its network reads the command and the hip speed in m/s; give "
+                      f"--stand-std-nm to this run too")  # fmt: skip
     restore_normalizer(vecnorm, snap)
     digest = hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
     run.write("init_from.json", json_text({"policy": str(src), "snapshot": which,
                                            "policy_sha256": digest}))  # fmt: skip
     print(f"starting PPO from {src} ({which}/, weights sha256 {digest[:12]})", flush=True)
     return model
+
+
+def _stand_trained(src: Path) -> bool:
+    """Whether the policy directory's config (where it has one) trained with ``stand_std_nm``."""
+    try:
+        return read_config(src).stand_std_nm > 0
+    except FileNotFoundError:
+        return False
 
 
 def _command_in_m_s(src: Path, snap, cfg: PPOConfig, policy) -> None:
