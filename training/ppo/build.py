@@ -25,7 +25,7 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         from training.ppo.exploration import StandNoisePolicy
 
         policy = StandNoisePolicy
-        gear = np.broadcast_to(np.asarray(cfg.action_map().gear, np.float64), (5,))
+        gear = cfg.action_map().gear  # N m per unit action, one per joint
         policy_kwargs["stand_log_std"] = np.log(cfg.stand_std_nm / gear).tolist()
         policy_kwargs["stand_speed"] = cfg.stand_speed_m_s
     extra = {"normalize_advantage": False} if cfg.stand_balance else {}  # the callback does it

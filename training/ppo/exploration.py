@@ -54,23 +54,12 @@ class PinnedStats(RunningMeanStd):
         self._index = list(indices)
         super().__init__(shape=shape)
 
-    @property
-    def mean(self) -> np.ndarray:
-        """The running mean (the pinned entry 0)."""
-        return self._mean
-
-    @mean.setter
-    def mean(self, v) -> None:
-        self._mean = _pinned(v, self._index, 0.0)
-
-    @property
-    def var(self) -> np.ndarray:
-        """The running variance (the pinned entry 1)."""
-        return self._var
-
-    @var.setter
-    def var(self, v) -> None:
-        self._var = _pinned(v, self._index, 1.0)
+    mean = property(lambda self: self._mean,
+                    lambda self, v: setattr(self, "_mean", _pinned(v, self._index, 0.0)),
+                    doc="The running mean (the pinned entries 0).")  # fmt: skip
+    var = property(lambda self: self._var,
+                   lambda self, v: setattr(self, "_var", _pinned(v, self._index, 1.0)),
+                   doc="The running variance (the pinned entries 1).")  # fmt: skip
 
 
 def pin_command(vecnorm) -> None:
