@@ -25,7 +25,9 @@ stops at a zero command:
   zero command the full weight (any contact state may be held: standing);
 * ``step``: weight * min(1, command / speed target) per completed step (none at zero);
 * ``effort``: weight * exp(-kernel * sum((tau / 150 N m)^2)), the torques' size (an energy
-  term; weight 0 by default: off).
+  term; weight 0 by default: off);
+* ``still``: at a zero command, weight * exp(-kernel * speed^2) in every model: slowing paid
+  on the way to a stop, not only once in model 4 (weight 0 by default: off).
 
 ``gated`` multiplies the speed, height and swing terms by the cadence kernel, as the gait reward.
 Every term is positive; a period ended by an event earns only its steps.
@@ -196,6 +198,11 @@ def command_effort_term(r, p) -> np.ndarray:
     return kernel(r, "effort", np.sqrt(p.tau_sq) / TORQUE_LIMIT_NM)
 
 
+def command_still_term(r, p) -> np.ndarray:
+    """At a zero command, the kernel of the period's mean hip speed in every model; else 0."""
+    return np.where(p.command == 0.0, kernel(r, "still", p.speed), 0.0)
+
+
 def command_steps_term(r, p) -> np.ndarray:
     """The steps completed, each paid min(1, command / speed target) (none at zero)."""
     return np.clip(p.command / r.targets["speed"], 0.0, 1.0) * p.steps
@@ -219,6 +226,9 @@ REWARD_KINDS["command"] = (
                doc="weight x min(1, command / speed target) per step"),
     RewardTerm("effort", 0.0, 2.0, value=command_effort_term,
                doc="kernel of sum((tau / 150 N m)^2), the torques' size (weight 0: off)"),
+    RewardTerm("still", 0.0, 4.0, value=command_still_term,
+               doc="at a zero command, the kernel of (the period's mean hip speed [m/s])^2 in "
+                   "every model, slowing paid on the way to a stop (weight 0: off)"),
 )  # fmt: skip
 COMMAND_TERMS = tuple(t.name for t in REWARD_KINDS["command"])
 """The command reward's terms, in order."""

@@ -150,7 +150,9 @@ class ConstrainedBipedEnv(gym.Env):
     episodes on a bad posture), and, only if ``termination["max_first_phase_s"]`` is set,
     ``first_phase_time`` (the first contact phase of a start near rest, model 1 with every joint
     rate at most 0.6 rad/s, held longer than that [s]; ``max_model_time_s`` then applies from
-    the first model switch on).
+    the first model switch on), and, only if ``termination["max_stop_s"]`` is set (with a
+    command), ``stop_time`` (the hip faster than 0.1 m/s in a period more than that [s] after
+    the command became zero: walking on through a stop).
     A fall is one of these (a knee or the hip below the ground).
     ### Truncation
     By simulated time: ``termination["time_limit_s"]`` (default 30 s; None: none), the first
@@ -196,6 +198,7 @@ class ConstrainedBipedEnv(gym.Env):
     | termination | {} | dict: "fall_hip_height_m" (None: end when the hip is below [m]), |
     | | | "max_model_time_s" (None: end when one model has lasted longer [s]), |
     | | | "max_first_phase_s" (None: end when a start near rest's first model lasts longer [s]), |
+    | | | "max_stop_s" (None: end when still moving that long after a zero command [s]), |
     | | | "time_limit_s" (30: truncation by simulated time [s]; None: none) |
     | observation | [] | blocks appended to the 24 entries: ["phase"] (the contact clock, below) |
     | perturbations | None | dict: pushes, model error, slopes, sensor noise, action delay |
@@ -328,6 +331,8 @@ class ConstrainedBipedEnv(gym.Env):
       command rewards' ``first_phase_s`` (its cadence target), for a start from rest whose
       sway before the first step is longer than a walking phase; the gait reward's
       ``switch`` term (a weight per forward model switch, 0 by default; ``info["reward_switch"]``).
+      Added: the command reward's ``still`` term (weight 0: off) and
+      ``termination["max_stop_s"]`` (reason ``stop_time``).
 
     Example:
         >>> import gymnasium as gym

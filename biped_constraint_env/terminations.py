@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .rewards import check_fall_height
+from .rewards import REC_PROGRESS, check_fall_height
+from .state import FS_T
 from .tasks import EPISODE_S, MAX_EPISODE_S
 from .validation import check_mapping, check_real
 
@@ -78,6 +79,56 @@ class FirstPhaseTime(ModelTime):
         return lambda: self.clock.opening
 
 
+STOP_SPEED_M_S = 0.1
+"""The hip speed [m/s] (a period's mean, either way) that ends a zero command's episode after
+its grace time (:class:`StopTime`): the command protocol's bound on every period of a stand."""
+
+
+class StopTime:
+    """``termination={"max_stop_s": T}``: still moving T [s] after a zero command.
+
+    With a command, a row whose command has been zero for longer than T [s] (since it became
+    zero, or the episode began at zero) and whose hip moved faster than
+    :data:`STOP_SPEED_M_S` in the period: an early termination that makes walking on through
+    a zero command end the episode, as the command protocol's stop asks (at rest within 3 s).
+    Reason ``stop_time``.
+    """
+
+    reason = "stop_time"
+
+    def __init__(self, core, limit_s: float):
+        """For ``core``'s commands and hip progress, and the grace time [s]."""
+        if core.commands is None:
+            raise ValueError("termination max_stop_s needs a command (task='command')")
+        self.core, self.limit_s, self.dt = core, limit_s, core.settings.physics.dt
+        self.since = np.full(core.n, np.nan)  # the episode time the zero command began
+
+    def __call__(self, skip) -> np.ndarray:
+        """(n,) the stepped rows still moving past the grace time of their zero command."""
+        core = self.core
+        t = core.sim.fst[:, FS_T]  # after the period: its end
+        zero = core.commands.v == 0.0
+        since = np.where(zero, self.since, np.nan)
+        fresh = zero & ~(since <= t - self.dt + 1e-9)  # a new zero run, or a new episode
+        since[fresh] = t[fresh] - self.dt
+        if skip is None:
+            self.since = since
+        else:
+            stepped = np.ones(core.n, bool)
+            stepped[skip] = False
+            self.since[stepped] = since[stepped]
+        speed = np.abs(core.buf.rew[:, REC_PROGRESS]) / self.dt
+        over = zero & (t - self.since > self.limit_s + 1e-9) & (speed > STOP_SPEED_M_S)
+        if skip is not None:
+            over[skip] = False
+        return over
+
+
+def check_stop_time(value) -> float:
+    """A zero command's grace time before moving ends the episode [s]."""
+    return check_real("max_stop_s", value, 0.0, 1e3, low_open=True, unit=" [s]")
+
+
 def check_model_time(value) -> float:
     """A contact phase's longest time [s]."""
     return check_real("max_model_time_s", value, 0.0, 1e3, low_open=True, unit=" [s]")
@@ -103,6 +154,7 @@ class Termination:
 TERMINATIONS: dict[str, Termination] = {
     "max_model_time_s": Termination(check_model_time, ModelTime, needs_clock=True),
     "max_first_phase_s": Termination(check_first_phase_time, FirstPhaseTime, needs_clock=True),
+    "max_stop_s": Termination(check_stop_time, StopTime),
 }
 """The learning task's terminations by their ``termination`` key, in the order they run."""
 BUILT_IN = ("fall_hip_height_m", "time_limit_s")

@@ -100,6 +100,16 @@ def test_command_reward_follows_the_command_and_pays_standing_at_zero():
                        s.dt, 2)  # fmt: skip
     out = on.terms(np.zeros(2), command=np.ones(2), **dict(args, tau_sq=np.array([0.0, 75.0**2])))
     assert out[:, 5].tolist() == pytest.approx([0.2, 0.2 * np.exp(-2.0 * 0.25)])
+    # the still term: off by default; on, at a zero command it pays slowness in every model
+    assert not r.terms(np.zeros(2), command=np.zeros(2), **args)[:, 6].any()
+    still = CommandReward(make_settings(task="command", reward={"kind": "command",
+                                                                "weights": {"still": 0.4}}).reward,
+                          s.dt, 2)  # fmt: skip
+    for m in (1, 2, 3, 4):
+        out = still.terms(np.array([0.5, 0.5]) * s.dt, command=np.array([0.0, 1.0]),
+                          **dict(args, modes=np.array([m, m])))  # fmt: skip
+        assert out[:, 6].tolist() == pytest.approx([0.4 * np.exp(-4 * 0.25), 0.0])
+        assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
 
 
 def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():

@@ -434,6 +434,12 @@ def test_env_table_flags_go_on_top_of_the_config_table():
     import tomllib
 
     assert tomllib.loads(to_toml(cfg))["env"] == cfg.env  # round trip
+    # a table flag given twice keeps both flags' items (the later wins a key given twice)
+    cfg = parse_config(PPOConfig, ["--env", "dt=0.02", 'start="rest"', "--env", 'start="stand"',
+                                   "--train-env", 'start="rest"', "--train-env",
+                                   "termination={max_model_time_s=1.5}"], "")  # fmt: skip
+    assert cfg.env == {"dt": 0.02, "start": "stand"}
+    assert cfg.train_env == {"start": "rest", "termination": {"max_model_time_s": 1.5}}
     with pytest.raises(SystemExit, match="dt must be"):
         parse_config(PPOConfig, ["--env", "dt=-1"], "")
     with pytest.raises(SystemExit, match="KEY=VALUE"):

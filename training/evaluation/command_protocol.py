@@ -10,8 +10,9 @@ command a function of its time), on the report seeds, with the default strict ph
   |stride speed - command| (a stride: two steps; strides that end after ``SETTLE_S``), and the
   episodes that ran 30 s;
 * **stop**: walk at a command drawn in [0.3, 2.0] m/s for ``STOP_AT_S``, then 0: a success
-  stands (hip speed < ``STAND_SPEED_M_S``, the period's mean) within ``STOP_WITHIN_S`` and
-  holds it for ``HOLD_S`` with a mean drift below the same speed; then the command is 1.0 m/s
+  stands (hip speed < ``STAND_SPEED_M_S``, the period's mean) at some period within
+  ``STOP_WITHIN_S`` and holds it from there for ``HOLD_S`` with a mean drift below the same
+  speed (:func:`stands`); then the command is 1.0 m/s
   again: **restart**, a success takes at least ``RESTART_STEPS`` steps in the next 10 s with
   no termination;
 * **sequence**: a new command uniform in [0, 2] m/s every U(2, 5) s over 30 s: a success is no
@@ -156,6 +157,27 @@ def tracking_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     return rows
 
 
+def stands(t: np.ndarray, v: np.ndarray, t0: float, end_t: float) -> tuple[bool, float]:
+    """The stop test on the period-mean hip speeds ``v`` [m/s] at period ends ``t`` [s].
+
+    A zero command from ``t0``: a success is at rest (|v| < STAND_SPEED_M_S) at some period
+    within STOP_WITHIN_S, held from there for HOLD_S (every period below twice that speed,
+    their mean below it), with the episode running (``end_t``: its last time) to
+    STOP_WITHIN_S + HOLD_S after ``t0``. Returns (success, the hold's mean |v|: of the first
+    such period that holds, else of the first at rest; inf where none is at rest).
+    """
+    ran = end_t >= t0 + STOP_WITHIN_S + HOLD_S - 1e-9
+    calm = (t > t0) & (t <= t0 + STOP_WITHIN_S) & (np.abs(v) < STAND_SPEED_M_S)
+    drift = math.inf
+    for first in t[calm] if ran else ():
+        hold = (t > first) & (t <= first + HOLD_S)
+        d = float(np.abs(v[hold]).mean()) if hold.any() else math.inf
+        drift = d if math.isinf(drift) else drift
+        if hold.any() and np.all(np.abs(v[hold]) < 2 * STAND_SPEED_M_S) and d < STAND_SPEED_M_S:
+            return True, d
+    return False, drift
+
+
 def stop_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     """Walk, stop (command 0), stand, restart at 1.0 m/s."""
     rng = np.random.default_rng(int(seeds[0]))
@@ -169,18 +191,7 @@ def stop_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     stood, restarted, drifts = [], [], []
     for ep in eps:
         t, v = _speed_at(ep)
-        ok = ep["t"][-1] >= restart_at - 1e-9
-        calm = (t > STOP_AT_S) & (t <= STOP_AT_S + STOP_WITHIN_S) & (np.abs(v) < STAND_SPEED_M_S)
-        first = t[calm].min() if ok and calm.any() else math.inf
-        hold = (t > first) & (t <= first + HOLD_S)
-        drift = float(np.abs(v[hold]).mean()) if hold.any() else math.inf
-        stand = (
-            ok
-            and math.isfinite(first)
-            and first + HOLD_S <= restart_at + 1e-9
-            and bool(np.all(np.abs(v[hold]) < 2 * STAND_SPEED_M_S))
-            and drift < STAND_SPEED_M_S
-        )
+        stand, drift = stands(t, v, STOP_AT_S, ep["t"][-1])
         stood.append(stand)
         drifts.append(drift)
         after = [s for s in ep["step_t_s"] if s > restart_at]

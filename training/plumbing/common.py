@@ -241,8 +241,10 @@ def _parser(cls: type, description: str) -> argparse.ArgumentParser:
         kind = hints[f.name]
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
         text = f"{helps.get(f.name, '')} (default: {default})".strip()
-        if kind is dict:  # a table: KEY=VALUE items on top of the config file's table
-            parser.add_argument(flag, nargs="+", default=None, help=text, metavar="KEY=VALUE")
+        if kind is dict:  # a table: KEY=VALUE items on top of the config file's table;
+            # the flag given twice adds the second's items (argparse would drop the first's)
+            parser.add_argument(flag, nargs="+", action="extend", default=None, help=text,
+                                metavar="KEY=VALUE")  # fmt: skip
         elif getattr(kind, "__origin__", None) is tuple:
             elem = kind.__args__[0]
             parser.add_argument(
