@@ -303,6 +303,9 @@ def make_settings(
     if (reward_s.kind == "command") != (commands is not None):
         raise ValueError("reward='command' and the command option go together: reward kind "
                          f"{reward_s.kind!r}, command {t.get('command')!r}")  # fmt: skip
+    term = termination_settings(termination)
+    if term.get("max_stop_s") is not None and commands is None:
+        raise ValueError("termination max_stop_s needs a command (task='command')")
     return EnvSettings(
         task=task,
         physics=PhysicsSettings(params, t["preset"], options, dt),
@@ -312,7 +315,7 @@ def make_settings(
         observation=_observation(t["observation"], commands is not None),
         perturbations=perturbation_settings(perturbations),
         reference=_reference(reference, start_kind),
-        termination=termination_settings(termination),
+        termination=term,
         command=commands,
     )
 

@@ -91,15 +91,16 @@ class StopTime:
     zero, or the episode began at zero) and whose hip moved faster than
     :data:`STOP_SPEED_M_S` in the period: an early termination that makes walking on through
     a zero command end the episode, as the command protocol's stop asks (at rest within 3 s).
-    Reason ``stop_time``.
+    The speed is the period's hip progress over the control period ``dt`` (the reward's
+    speed; a period cut short at a model switch reads slower by its fraction) and the zero
+    command's start the end of its first period less ``dt``. Reason ``stop_time``; needs a
+    command (refused by the settings otherwise).
     """
 
     reason = "stop_time"
 
     def __init__(self, core, limit_s: float):
         """For ``core``'s commands and hip progress, and the grace time [s]."""
-        if core.commands is None:
-            raise ValueError("termination max_stop_s needs a command (task='command')")
         self.core, self.limit_s, self.dt = core, limit_s, core.settings.physics.dt
         self.since = np.full(core.n, np.nan)  # the episode time the zero command began
 

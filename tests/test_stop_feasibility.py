@@ -42,6 +42,8 @@ def test_knots_are_linear_between_and_held_after_the_span():
     assert _at(knots, 0.5, 2.0)[0, 0] == pytest.approx(0.5)
     assert _at(knots, 1.5, 2.0)[0, 0] == pytest.approx(1.5)
     assert _at(knots, 5.0, 2.0)[0, 0] == pytest.approx(2.0)
+    two = np.concatenate([knots, 2 * knots])  # rows at their own times
+    assert _at(two, np.array([0.5, 1.5]), 2.0)[:, 0] == pytest.approx([0.5, 3.0])
 
 
 def test_a_pd_hold_of_the_standing_start_stands_and_a_shove_does_not():
@@ -60,5 +62,6 @@ def test_a_pd_hold_of_the_standing_start_stands_and_a_shove_does_not():
     assert (KP, KD) == (100.0, 10.0)
     ok0, drift0 = stands(t, np.nan_to_num(v[0], nan=1.0), 0.0, alive_to[0])
     ok1, _ = stands(t, np.nan_to_num(v[1], nan=1.0), 0.0, alive_to[1])
-    assert ok0 and drift0 < 0.01
-    assert not ok1
+    assert ok0 and drift0 < 0.01 and alive_to[0] == pytest.approx(STOP_WITHIN_S + HOLD_S)
+    moved = np.abs(np.nan_to_num(v[1], nan=0.0)).max() > 0.1
+    assert not ok1 and (alive_to[1] < STOP_WITHIN_S + HOLD_S or moved)  # ended it, or moved it
