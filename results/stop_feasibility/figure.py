@@ -30,7 +30,11 @@ def main(src: str, dst: str) -> None:
     ax.set_title("best searched stop from the published walk's states "
                  "(grey: the rest band; line: 3 s)", fontsize=8)  # fmt: skip
     fig.tight_layout()
-    fig.savefig(dst, dpi=110)
+    from pathlib import Path
+
+    from training.plumbing.outputs import save_figure  # the package's writer: no link followed
+
+    save_figure(fig, Path(dst), dpi=110)
 
 
 if __name__ == "__main__":
