@@ -176,6 +176,11 @@ def test_protocol_measures_stride_speed_and_sets_commands_between_periods(monkey
         {"obs_noise": (0.005, 0.05)},
     ]
     assert kw[3]["perturbations"] == {"slope_rad": pytest.approx(np.radians(-5.0))}
+    n = len(cp.SLOPES_DEG)  # each slope from the policy's start, then from mid-stride
+    assert len(kw) == 3 + 2 * n and "start" not in kw[3] and kw[3 + n]["start"] == "midstride"
+    assert kw[3 + n]["perturbations"] == kw[3]["perturbations"]
+    assert rows[3]["row"] == "slope -5.0 deg, 1.0 m/s"
+    assert rows[3 + n]["row"] == "slope -5.0 deg from mid-stride, 1.0 m/s"
     assert [r["row"] for r in rows[:3]] == [
         "link masses ±10%, 1.0 m/s",
         "K 0.4-0.6, 1.0 m/s",

@@ -20,7 +20,8 @@ command a function of its time), on the report seeds, with the default strict ph
 * with ``--robustness``, **pushes** (an OSU-style table: hip Δv of ``PUSH_DV_M_S`` forward and
   backward, each episode at its own phase of the gait, shown in ``PUSH_PHASES`` bins,
   commanded 1.0 m/s: a success is no termination in the 10 s after the push),
-  **slopes** (``SLOPES_DEG`` at 1.0 m/s: the walking success) and the **model's
+  **slopes** (``SLOPES_DEG`` at 1.0 m/s: the walking success, from the policy's start and
+  from mid-stride) and the **model's
   randomisation** and **sensor noise** (``MODEL_CONDITIONS`` at 1.0 m/s, each alone: the
   walking success).
 """
@@ -305,11 +306,16 @@ MODEL_CONDITIONS = (
 """The model's randomisation and the sensor noise of the robustness protocol, each alone."""
 
 
-def _walk_rows(act, env_kwargs, seeds, env_id, conditions) -> list[dict]:
-    """The walking success at 1.0 m/s under each (label, perturbations) of ``conditions``."""
+def _walk_rows(act, env_kwargs, seeds, env_id, conditions, start=None) -> list[dict]:
+    """The walking success at 1.0 m/s under each (label, perturbations) of ``conditions``.
+
+    ``start``: the episodes' start (None: the policy's own, ``env_kwargs``'s).
+    """
     rows = []
     for label, pert in conditions:
         kw = {**env_kwargs, "perturbations": {**(env_kwargs.get("perturbations") or {}), **pert}}
+        if start is not None:
+            kw["start"] = start
         eps = run_commanded(act, kw, seeds, lambda t, k: np.full(len(t), START_COMMAND_M_S),
                             30.0, env_id)  # fmt: skip
         rows.append({"row": f"{label}, 1.0 m/s",
@@ -319,9 +325,17 @@ def _walk_rows(act, env_kwargs, seeds, env_id, conditions) -> list[dict]:
 
 
 def slope_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
-    """Slopes at 1.0 m/s: the walking success on each."""
-    slopes = [(f"slope {deg:+.1f} deg", {"slope_rad": math.radians(deg)}) for deg in SLOPES_DEG]
-    return _walk_rows(act, env_kwargs, seeds, env_id, slopes)
+    """Slopes at 1.0 m/s: the walking success on each, from the policy's start, then mid-stride.
+
+    The mid-stride rows measure the walk on the slope apart from the start on it (the rest
+    posture, made for flat ground, leans back on a slope rising forward).
+    """
+    rows = []
+    for start, where in ((None, ""), ("midstride", " from mid-stride")):
+        slopes = [(f"slope {deg:+.1f} deg{where}", {"slope_rad": math.radians(deg)})
+                  for deg in SLOPES_DEG]  # fmt: skip
+        rows += _walk_rows(act, env_kwargs, seeds, env_id, slopes, start)
+    return rows
 
 
 def model_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
