@@ -85,7 +85,11 @@ class ConstrainedBipedEnv(gym.Env):
 
     With ``observation=["phase"]`` two entries follow (:mod:`.clock`): 24, the first-step flag (1
     from a start at rest until its first step completes), and 25, the time in the current
-    model [s] (counted in control periods, clipped to 2 s): ``Box((26,))``.
+    model [s] (counted in control periods, clipped to 2 s): ``Box((26,))``. With
+    ``observation=["gravity"]`` two entries follow: the direction of gravity in the ground's
+    frame, (-sin a, -cos a) on a slope of a (``gravity_y``, ``gravity_z``; legged-robot RL's
+    projected gravity, an IMU's reading); without it a slope shows only in the motion. Blocks
+    follow in the order listed; the command's entry comes last.
 
     The bounds are the named constants ``OBS_RATE_LIMIT_RAD_S``, ``OBS_LENGTH_LIMIT_M``,
     ``OBS_SPEED_LIMIT_M_S`` and ``OBS_FORCE_LIMIT_N``; values beyond them (far outside walking)
@@ -200,7 +204,8 @@ class ConstrainedBipedEnv(gym.Env):
     | | | "max_first_phase_s" (None: end when a start near rest's first model lasts longer [s]), |
     | | | "max_stop_s" (None: end when still moving that long after a zero command [s]), |
     | | | "time_limit_s" (30: truncation by simulated time [s]; None: none) |
-    | observation | [] | blocks appended to the 24 entries: ["phase"] (the contact clock, below) |
+    | observation | [] | blocks appended to the 24 entries: "phase" (the contact clock), "gravity" |
+    | | | (the direction of gravity in the ground's frame), in the order listed; below |
     | perturbations | None | dict: pushes, model error, slopes, sensor noise, action delay |
     | | | (:mod:`.perturbations`; ``slope_rad``: the ground's slope [rad], a constant or drawn |
     | | | per episode from (lo, hi), gravity turned by it in the ground's frame) |
@@ -333,6 +338,8 @@ class ConstrainedBipedEnv(gym.Env):
       ``switch`` term (a weight per forward model switch, 0 by default; ``info["reward_switch"]``).
       Added: the command reward's ``still`` term (weight 0: off) and
       ``termination["max_stop_s"]`` (reason ``stop_time``).
+      Added: the ``"gravity"`` observation block (the direction of gravity in the ground's
+      frame: a slope is observed).
 
     Example:
         >>> import gymnasium as gym

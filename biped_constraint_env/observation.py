@@ -134,9 +134,23 @@ class ObservationBlock:
     needs_clock: bool = False
 
 
+GRAVITY_NAMES = ("gravity_y", "gravity_z")
+"""The ``"gravity"`` block: the direction of gravity in the ground's frame (a unit vector,
+(-sin a, -cos a) on a slope of a rising forward; (0, -1) on flat ground), what legged-robot RL
+observes from an IMU as the projected gravity. Without it a slope shows only in the motion:
+at rest the observation on a slope equals the one on flat ground."""
+
+
+def gravity_features(core) -> np.ndarray:
+    """(n, 2): each row's gravity direction in the ground's frame (:data:`GRAVITY_NAMES`)."""
+    a = np.array([p.slope_rad for p in core.perturb.params])
+    return np.stack([-np.sin(a), -np.cos(a)], axis=1)
+
+
 OBSERVATION_BLOCKS: dict[str, ObservationBlock] = {
     "phase": ObservationBlock(PHASE_NAMES, PHASE_LOW, PHASE_HIGH,
                               lambda core: core.clock.features(), needs_clock=True),
+    "gravity": ObservationBlock(GRAVITY_NAMES, -np.ones(2), np.ones(2), gravity_features),
     "command": ObservationBlock(("command_m_s",), COMMAND_OBS_LOW, COMMAND_OBS_HIGH,
                                 lambda core: core.commands.features()),
 }  # fmt: skip

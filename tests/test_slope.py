@@ -134,3 +134,45 @@ def test_a_downhill_start_falls_forward_faster_and_the_render_draws_the_slope():
     dark = np.argwhere((frame == 90).all(axis=2))  # the ground line's pixels
     left, right = dark[dark[:, 1] < 100], dark[dark[:, 1] > frame.shape[1] - 100]
     assert left[:, 0].mean() < right[:, 0].mean() - 20  # downhill: the ground falls to the right
+
+
+def test_gravity_observation_gives_each_rows_slope_the_same_in_both_envs():
+    """``observation=["gravity"]``: (-sin a, -cos a) of each row's own slope, after the base
+    entries and before the command; on flat ground (0, -1). Without it the rest start's
+    observation on a slope equals the flat one (a slope shows only in the motion)."""
+    import gymnasium as gym
+
+    import biped_constraint_env  # noqa: F401
+    from biped_constraint_env.observation import OBS_DIM
+
+    G = slice(OBS_DIM, OBS_DIM + 2)  # the gravity block's entries
+
+    kw = {"perturbations": {"slope_rad": (-0.09, 0.09)}, "observation": ["gravity", "phase"],
+          "task": "command"}  # fmt: skip
+    single = gym.make("ConstrainedBiped-v0", **kw)
+    assert single.observation_space.shape == (OBS_DIM + 5,)
+    rows = []
+    for s in range(4):
+        obs, _ = single.reset(seed=s, options={"command": 0.7})
+        a = single.unwrapped.core.perturb.params[0].slope_rad
+        assert obs[G] == pytest.approx([-math.sin(a), -math.cos(a)], abs=1e-15)
+        assert obs[-1] == 0.7  # the command's entry stays last
+        obs, *_ = single.step(np.zeros(5))
+        assert obs[G] == pytest.approx([-math.sin(a), -math.cos(a)], abs=1e-15)
+        rows.append(obs[G])
+    assert len({round(float(r[0]), 12) for r in rows}) == 4  # drawn per episode
+    venv = gym.make_vec("ConstrainedBiped-v0", num_envs=4, vectorization_mode="vector_entry_point",
+                        **kw)  # fmt: skip
+    obs, _ = venv.reset(seed=0)
+    first, _ = single.reset(seed=0)
+    np.testing.assert_array_equal(obs[0], first)
+    slopes = np.array([p.slope_rad for p in venv.unwrapped.core.perturb.params])
+    want = np.stack([-np.sin(slopes), -np.cos(slopes)], 1)
+    np.testing.assert_allclose(obs[:, G], want, atol=1e-15)
+    flat, _ = gym.make("ConstrainedBiped-v0", observation=["gravity"]).reset(seed=0)
+    assert flat[OBS_DIM:].tolist() == [0.0, -1.0]
+    plain = [gym.make("ConstrainedBiped-v0", start="rest", perturbations={"slope_rad": a})
+             .reset(seed=0)[0] for a in (0.0, 0.0873)]  # fmt: skip
+    np.testing.assert_array_equal(plain[0], plain[1])
+    with pytest.raises(ValueError, match="observation block"):
+        gym.make("ConstrainedBiped-v0", observation=["gravity", "slope"])
