@@ -20,6 +20,7 @@ import torch
 
 from training.evaluation.command_protocol import START_COMMAND_M_S, run_commanded
 from training.evaluation.stats import MIN_STEPS, wilson_interval
+from training.plumbing.outputs import write_file
 from training.ppo.policy_io import load_policy, policy_batch_actor
 
 torch.set_num_threads(1)
@@ -46,5 +47,5 @@ for deg in (-7.5, -5.0, -2.5, 0.0, 2.5, 5.0, 7.5):
                if failed_t else None}  # fmt: skip
         rows.append(row)
         print(json.dumps(row), flush=True)
-out.write_text(json.dumps({"policy": str(policy_dir), "seeds": [seeds[0], seeds[-1]],
+write_file(out, json.dumps({"policy": str(policy_dir), "seeds": [seeds[0], seeds[-1]],
                            "rows": rows}, indent=1) + "\n")  # fmt: skip

@@ -26,6 +26,7 @@ import torch
 
 import biped_constraint_env  # noqa: F401
 from training.evaluation.stats import MIN_STEPS
+from training.plumbing.outputs import write_file
 from training.ppo.policy_io import load_policy, policy_batch_actor
 
 PERIOD_S = 0.02
@@ -114,7 +115,7 @@ def main():
         print(json.dumps({k: v for k, v in out[-1].items()
                           if k not in ("best_ff_nm", "per_generation_most_steps_longest_s")}),
               flush=True)  # fmt: skip
-    a.out.write_text(json.dumps({"policy": str(a.policy), "args": {k: str(v) for k, v in
+    write_file(a.out, json.dumps({"policy": str(a.policy), "args": {k: str(v) for k, v in
                                  vars(a).items()}, "starts": out}, indent=1) + "\n")  # fmt: skip
 
 
