@@ -752,6 +752,61 @@ def test_a_run_without_the_criterion_uses_its_budget(tmp_path, monkeypatch):
     assert "budget of 1536 env steps ended" in (run / "training_time.txt").read_text()
 
 
+def test_a_confirmed_evaluation_stops_the_run_at_once_and_counts_every_episode(
+    tmp_path, monkeypatch, capsys
+):
+    """stop_confirm_episodes: an evaluation whose episodes all walk runs the same network on
+    the next selection seeds; with stop_evals 1 the run stops at that evaluation."""
+    from training.ppo import callbacks
+    from training.ppo.config import SELECTION_SEED_OFFSET
+
+    seen = []
+
+    def fake(act, env_kwargs, seeds, env_id="", **_kw):
+        seen.append(list(seeds))
+        return [{"steps_completed": 25, "distance_m": 20.0, "return": 1.0,
+                 "end": "time_limit"} for _ in seeds]  # fmt: skip
+
+    monkeypatch.setattr(callbacks, "run_episodes_batched", fake)
+    args = SMALL + ["--out-dir", str(tmp_path), "--total-timesteps", "4096", "--eval-freq", "512"]
+    args += ["--stop-min-steps", "20", "--stop-evals", "1", "--stop-confirm-episodes", "3"]
+    assert train_ppo.main(args) == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    assert 512 <= load_state(run / "final")["num_timesteps"] < 512 + 256
+    s = SELECTION_SEED_OFFSET
+    assert seen == [[s], [s + 1, s + 2, s + 3]]  # the evaluation, then the next seeds
+    with open(run / "eval.csv") as fh:
+        (row,) = list(csv.DictReader(fh))
+    assert json.loads(row["reasons"]) == {"time_limit": 4}
+    out = capsys.readouterr().out
+    assert "[stop] 512 env steps" in out and "(1 + 3 episodes of the same network)" in out
+    why = json.loads((run / "published.json").read_text())["why"]
+    assert "3 more where all met the stop criterion" in why and "at 512 env steps" in why
+
+
+def test_a_failed_confirmation_neither_stops_nor_scores_the_evaluation_as_walking(
+    tmp_path, monkeypatch
+):
+    from training.ppo import callbacks
+    from training.ppo.config import SELECTION_SEED_OFFSET
+
+    def fake(act, env_kwargs, seeds, env_id="", **_kw):  # the confirmation's seeds fall
+        return [{"steps_completed": 25 if k == SELECTION_SEED_OFFSET else 2, "distance_m": 1.0,
+                 "return": 1.0, "end": "time_limit"} for k in seeds]  # fmt: skip
+
+    monkeypatch.setattr(callbacks, "run_episodes_batched", fake)
+    args = SMALL + ["--out-dir", str(tmp_path), "--total-timesteps", "1536", "--eval-freq", "512"]
+    args += ["--stop-min-steps", "20", "--stop-evals", "1", "--stop-confirm-episodes", "2"]
+    assert train_ppo.main(args) == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    assert load_state(run / "final")["num_timesteps"] >= 1536
+    with open(run / "eval.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 3 and {r["steps_min"] for r in rows} == {"2"}
+    assert load_state(run / "best")["score"] < 20
+    assert "budget of 1536 env steps ended" in (run / "training_time.txt").read_text()
+
+
 # ------------------------------------------------------------------ a second review's findings
 def test_a_refused_out_keeps_the_users_staging_named_folder(tmp_path):
     out = tmp_path / "userdir"

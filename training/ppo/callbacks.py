@@ -442,13 +442,22 @@ def make_callbacks(
                 optimizer=True,
             )
 
-        def _evaluate(self, n):
-            eps = run_episodes_batched(
+        def _episodes(self, first: int, count: int) -> list[dict]:
+            return run_episodes_batched(
                 policy_batch_actor(self.model.policy, _vecnorm_normalizer(vecnorm), cfg),
                 cfg.env_kwargs(),
-                range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + cfg.eval_episodes),
+                range(SELECTION_SEED_OFFSET + first, SELECTION_SEED_OFFSET + first + count),
                 cfg.env_id,
             )
+
+        def _evaluate(self, n):
+            eps = self._episodes(0, cfg.eval_episodes)
+            if (
+                cfg.stop_min_steps > 0
+                and cfg.stop_confirm_episodes > 0
+                and min(e["steps_completed"] for e in eps) >= cfg.stop_min_steps
+            ):  # the same network on the next selection seeds
+                eps += self._episodes(cfg.eval_episodes, cfg.stop_confirm_episodes)
             row = _eval_row(eps, n, time.time() - self.t0)
             _append_csv(run, "eval.csv", row)
             for k in ("steps_mean", "distance_mean_m", "return_mean"):
@@ -481,5 +490,8 @@ def make_callbacks(
 
 def stop_reason(cfg: PPOConfig) -> str:
     """The stop criterion in words (it held)."""
-    return (f"every selection episode completed at least {cfg.stop_min_steps} steps in "
-            f"{cfg.stop_evals} consecutive evaluations")  # fmt: skip
+    where = (f"{cfg.stop_evals} consecutive evaluations" if cfg.stop_evals > 1
+             else "an evaluation")  # fmt: skip
+    confirm = (f" ({cfg.eval_episodes} + {cfg.stop_confirm_episodes} episodes of the same "
+               "network)" if cfg.stop_confirm_episodes > 0 else "")  # fmt: skip
+    return f"every selection episode completed at least {cfg.stop_min_steps} steps in {where}{confirm}"

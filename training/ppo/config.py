@@ -81,6 +81,10 @@ class PPOConfig:
     # completed at least this many steps in stop_evals consecutive evaluations (its own
     # criterion, on the selection seeds); 0: it trains to total_timesteps
     stop_evals: int = 2  # consecutive evaluations the stop criterion must hold
+    stop_confirm_episodes: int = 0  # > 0: an evaluation whose every episode met the stop
+    # criterion runs the same network on this many more selection episodes (the next seeds);
+    # it meets the criterion only if they all do too, and its row, its score for best/ and
+    # the stop read all of its episodes (0: the evaluation's episodes alone)
     restart: dict = field(default_factory=dict)  # [restart] table: a network that has not
     # found the step draws again: at every `every` env steps, while fewer than `max` restarts
     # were made, if the training episodes that ended in the last `window` env steps completed
@@ -390,6 +394,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("stand_std_nm", 0.0, 150.0), ("stand_speed_m_s", 0.0, 10.0), ("action_bias_nm", -150.0, 150.0),
     ("critic_warmup", 0, _BIG), ("bc_anchor_steps", 0, 1_000_000), ("bc_anchor_lr", 0.0, 1.0),
     ("stop_min_steps", 0, 100_000), ("stop_evals", 1, 1000),
+    ("stop_confirm_episodes", 0, 100_000),
 )  # fmt: skip
 
 

@@ -119,9 +119,11 @@ def publish(cfg: PPOConfig, run: OutDir, ended: str = "") -> None:
         by = {"min": "the fewest steps of", "return": "the mean return over"}.get(
             cfg.select_by, "the mean steps over"
         )
+        more = (f", {cfg.stop_confirm_episodes} more where all met the stop criterion"
+                if cfg.stop_confirm_episodes > 0 and cfg.stop_min_steps > 0 else "")  # fmt: skip
         why = (
             f"the run's selection: the best score ({by} {cfg.eval_episodes} selection "
-            f"episodes, seeds {SELECTION_SEED_OFFSET}+) at {st['num_timesteps']} env steps"
+            f"episodes{more}, seeds {SELECTION_SEED_OFFSET}+) at {st['num_timesteps']} env steps"
         )
         which = "best"
     else:
