@@ -494,4 +494,5 @@ def stop_reason(cfg: PPOConfig) -> str:
              else "an evaluation")  # fmt: skip
     confirm = (f" ({cfg.eval_episodes} + {cfg.stop_confirm_episodes} episodes of the same "
                "network)" if cfg.stop_confirm_episodes > 0 else "")  # fmt: skip
-    return f"every selection episode completed at least {cfg.stop_min_steps} steps in {where}{confirm}"
+    steps = cfg.stop_min_steps
+    return f"every selection episode completed at least {steps} steps in {where}{confirm}"
