@@ -17,7 +17,9 @@ Rows:
 * the same with torch on two threads in the updates only (``update_threads = 2``: the env is
   idle then), the setting for one training process on 2 cores;
 * PPO with the env on two numba threads next to torch on one (the oversubscription the
-  one-thread default avoids);
+  one-thread default avoids), and the same with torch on two threads in the updates: one
+  training process alone on 2 cores with ``--env-threads 2 --update-threads 2`` (the batched
+  env's rows split between two threads give the same numbers as one thread);
 * two PPO processes side by side (two training seeds at once, as ``training.ppo.sweep`` or two
   shells run them), each on one env and one torch thread: the sum of their rates;
 * the batched env alone on one thread, stepped with actions drawn as the config's initial
@@ -165,6 +167,9 @@ def main(argv=None) -> int:
             cfg, a.steps, 1, 2, shares="PPO, env 1 thread, torch 1 thread (2 in updates)"
         ),
         "PPO, env 2 threads, torch 1 thread": lambda: ppo_steps_per_s(cfg, a.steps, 2, 1),
+        "PPO, env 2 threads, torch 1 thread (2 in updates)": lambda: ppo_steps_per_s(
+            cfg, a.steps, 2, 2, shares="PPO, env 2 threads, torch 1 thread (2 in updates)"
+        ),
         "two PPO processes side by side, 1 + 1 threads each, in total": lambda: two_ppo_steps_per_s(
             a.config, a.steps, overrides
         ),

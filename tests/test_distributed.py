@@ -115,7 +115,9 @@ def test_sweep_runs_two_trials_to_completion(tmp_path):
         "checkpoint_freq=100000",
     ]
     argv = ["--config", "training/configs/ppo_scratch.toml", "--seeds", "0", "1"]
-    argv += ["--set", *tiny, "--eval-episodes", "1", "--num-cpus", "2", "--out-dir", str(tmp_path)]
+    # a trial holding 2 CPUs may step its env on 2 numba threads (Ray's workers get 1 else)
+    argv += ["--set", *tiny, "env_threads=2", "--cpus-per-trial", "2"]
+    argv += ["--eval-episodes", "1", "--num-cpus", "2", "--out-dir", str(tmp_path)]
     assert sweep.main(argv) == 0
     assert not ray.is_initialized()
     with open(tmp_path / "sweep_ppo_scratch" / "results.csv") as fh:

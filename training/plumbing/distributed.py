@@ -86,15 +86,17 @@ def check_address(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
         ) from None
 
 
-def init_ray(address: str | None = None, num_cpus: int | None = None):
+def init_ray(address: str | None = None, num_cpus: int | None = None, threads: int = 1):
     """Connect to the Ray cluster at ``address``, or start a local instance (None or "").
 
-    The workers get :data:`WORKER_ENV` (one thread each). Returns the ``ray`` module.
+    The workers get :data:`WORKER_ENV` (one thread each), with numba allowed ``threads``
+    threads (a sweep's trial holding several CPUs: ``train_ppo --env-threads`` up to that).
+    Returns the ``ray`` module.
     """
     ray = _import_ray()
     if ray.is_initialized():
         return ray
-    runtime_env = {"env_vars": dict(WORKER_ENV)}
+    runtime_env = {"env_vars": {**WORKER_ENV, "NUMBA_NUM_THREADS": str(threads)}}
     if address:
         check_address(address)
         ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
@@ -103,15 +105,18 @@ def init_ray(address: str | None = None, num_cpus: int | None = None):
     return ray
 
 
-def connect(use_ray: bool, address: str = "", num_cpus: int | None = None) -> None:
+def connect(
+    use_ray: bool, address: str = "", num_cpus: int | None = None, threads: int = 1
+) -> None:
     """For a command line: start or join Ray up front when asked, before any work is done.
 
-    An unreachable address or a missing Ray ends the program with a one-line message.
+    ``threads``: numba threads a worker may use (:func:`init_ray`). An unreachable address
+    or a missing Ray ends the program with a one-line message.
     """
     if not (use_ray or address):
         return
     try:
-        init_ray(address or None, num_cpus=num_cpus)
+        init_ray(address or None, num_cpus=num_cpus, threads=threads)
     except (ConnectionError, ImportError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
 

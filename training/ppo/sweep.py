@@ -141,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
         "--cpus-per-trial",
         type=int_in(1, 1024),
         default=1,
-        help="CPUs a trial holds (2 with --set update_threads=2: each run alone on 2 cores)",
+        help="CPUs a trial holds, and the numba threads its env may use (2 with --set "
+        "update_threads=2 env_threads=2: each run alone on 2 cores)",
     )
     ap.add_argument("--name", default="", help="sweep name (default: the config's stem)")
     ap.add_argument("--out-dir", type=Path, default=Path("runs"))
@@ -179,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         "settings": tune.grid_search([{**fixed, **c} for c in combos]),
         "eval_episodes": a.eval_episodes,
     }
-    connect(True, a.ray_address, a.num_cpus)
+    connect(True, a.ray_address, a.num_cpus, threads=a.cpus_per_trial)
     try:
         tuner = tune.Tuner(
             tune.with_resources(trial, {"cpu": a.cpus_per_trial}),
