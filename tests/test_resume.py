@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from subprocs import default_sigint
 
 from training.ppo import train as train_ppo
 from training.ppo.policy_io import STATE_FILE, find_snapshot, load_state, write_manifest
@@ -36,7 +37,12 @@ def _start(out: Path, args: list[str]) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "training.ppo.train", "--out-dir", str(out), *args]
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     return subprocess.Popen(
-        cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        cmd,
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        preexec_fn=default_sigint,
     )
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from subprocs import default_sigint
 
 from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock
@@ -352,7 +353,12 @@ def _evaluate_proc(out: Path, cwd: Path) -> subprocess.Popen:
     cmd += ["--out", str(out)]
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     return subprocess.Popen(
-        cmd, cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        cmd,
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        preexec_fn=default_sigint,
     )
 
 

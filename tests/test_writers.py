@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from subprocs import default_sigint
 
 from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock, command_output, write_file
@@ -273,7 +274,8 @@ def test_imitation_counters_are_checked(tmp_path):
 def _start(args: list[str]) -> subprocess.Popen:
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     return subprocess.Popen([sys.executable, "-m", "training.ppo.train", *args], cwd=ROOT,
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=default_sigint)  # fmt: skip
 
 
 def test_a_kill_campaign_leaves_exactly_the_final_runs_evaluations(tmp_path):

@@ -31,11 +31,13 @@ class TasksFailed(RuntimeError):
     """Some tasks raised.
 
     ``results`` holds every other task's result (None where one failed) and ``failures``
-    (index, description of the arguments, error text) the failed ones.
+    (index, description of the arguments, error text) the failed ones, in task order
+    (Ray finishes tasks in any order).
     """
 
     def __init__(self, failures: list[tuple[int, str, str]], results: list[Any]):
         """Store the failures and the kept results; the message lists each failure."""
+        failures = sorted(failures, key=lambda f: f[0])
         lines = [f"task {i} ({args}) failed: {err}" for i, args, err in failures]
         super().__init__(f"{len(failures)} of {len(results)} tasks failed:\n" + "\n".join(lines))
         self.failures = failures
