@@ -487,3 +487,24 @@ def test_a_discount_ramp_sets_gamma_where_sb3_reads_it_before_each_rollout():
                 {"gamma_final": 0.98, "gamma_ramp": (5, 2)}):  # fmt: skip
         with pytest.raises(ValueError, match="go together"):
             PPOConfig(**bad).validate()
+
+
+def test_save_gif_keeps_every_frame_close_to_its_colours(tmp_path):
+    """One shared palette: every frame is there, in order, within a few levels per channel."""
+    from PIL import Image
+
+    from training.plumbing.plots import save_gif
+
+    frames = []
+    for k in range(20):
+        im = np.full((60, 80, 3), 255, np.uint8)
+        im[10:30, 2 * k : 2 * k + 10] = (200, 30, 30)  # a red block moving right
+        im[40:50, :] = (30, 30 + 5 * k, 200)  # a band changing colour
+        frames.append(im)
+    save_gif(frames, tmp_path / "a.gif", fps=50)
+    with Image.open(tmp_path / "a.gif") as gif:
+        assert gif.n_frames == 20
+        for k in (0, 7, 19):
+            gif.seek(k)
+            err = np.abs(np.asarray(gif.convert("RGB"), int) - frames[k].astype(int))
+            assert err.mean() < 2.0 and err.max() <= 64, (k, err.mean(), err.max())

@@ -98,14 +98,25 @@ def mode_timeline(
 
 
 def save_gif(images: Sequence[np.ndarray], path: Path, fps: float) -> None:
-    """Write RGB frames as an animated GIF (whole, never through a link: :func:`write_file`)."""
+    """Write RGB frames as an animated GIF (whole, never through a link: :func:`write_file`).
+
+    One 255-colour palette (median cut over up to eight frames spread through the clip) maps
+    every frame, without dithering: about 5x faster than Pillow's adaptive palette per frame,
+    which dominated an evaluation's wall time.
+    """
     import io
 
     from PIL import Image
 
     if not images:
         return
-    frames = [Image.fromarray(im) for im in images]
+    sample = images[:: max(1, len(images) // 8)][:8]
+    palette = Image.fromarray(np.concatenate(sample, axis=0)).quantize(
+        colors=255, method=Image.Quantize.MEDIANCUT
+    )
+    frames = [
+        Image.fromarray(im).quantize(palette=palette, dither=Image.Dither.NONE) for im in images
+    ]
     buf = io.BytesIO()
     frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:],
                    duration=max(int(1000 / fps), 20), loop=0)  # fmt: skip
