@@ -8,6 +8,7 @@ is unchanged and nothing outside the named output was created, appended to or de
 
 from __future__ import annotations
 
+import ast
 import csv
 import errno
 import json
@@ -276,6 +277,32 @@ def _start(args: list[str]) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "training.ppo.train", *args], cwd=ROOT,
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             preexec_fn=default_sigint)  # fmt: skip
+
+
+@pytest.mark.parametrize("module", ["training.ppo.train", "training.evaluation.evaluate"])
+def test_ctrl_c_while_a_command_starts_is_one_line(tmp_path, module):
+    """A Ctrl-C during a command's imports (before its ``main``): one line, no traceback.
+
+    The command imports the hook first (checked in its source); the hook, in a program that
+    is one of the package's command files, shows an uncaught KeyboardInterrupt as one line.
+    """
+    path = ROOT / (module.replace(".", "/") + ".py")
+    tree = ast.parse(path.read_text())
+    first = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
+    first = [n for n in first if not (isinstance(n, ast.ImportFrom) and n.module == "__future__")]
+    assert isinstance(first[0], ast.Import)
+    assert first[0].names[0].name == "training.plumbing.interrupts"
+    code = (f"import sys; sys.argv = [{str(path)!r}]; import training.plumbing.interrupts; "
+            "raise KeyboardInterrupt")  # fmt: skip
+    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)  # fmt: skip
+    assert p.returncode != 0 and "Traceback" not in p.stderr, p.stderr
+    name = path.stem
+    assert p.stderr.strip() == f"{name}: interrupted while starting; nothing was written"
+    p = subprocess.run([sys.executable, "-c", "import training.plumbing.interrupts; "
+                        "raise KeyboardInterrupt"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)  # fmt: skip
+    assert "Traceback" in p.stderr  # imported as a library, nothing changes
 
 
 def test_a_kill_campaign_leaves_exactly_the_final_runs_evaluations(tmp_path):
