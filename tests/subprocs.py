@@ -4,6 +4,17 @@ from __future__ import annotations
 
 import signal
 
+COMMANDS = [  # every command of the package, as `python -m` runs it
+    "training.ppo.train", "training.evaluation.evaluate", "training.evaluation.compare",
+    "training.paper.open_loop", "training.paper.optimize_open_loop",
+    "training.paper.paper_numerics", "training.paper.table2_study",
+    "training.controller.record_reference", "training.controller.tune",
+    "training.controller.model_controller", "training.ppo.policy_io", "training.ppo.sweep",
+    "benchmarks.accuracy", "benchmarks.bench_ab", "benchmarks.bench_bounds",
+    "benchmarks.bench_core",
+    "benchmarks.bench_env", "benchmarks.bench_ppo", "benchmarks.failure_modes",
+]  # fmt: skip
+
 
 def default_sigint() -> None:
     """``preexec_fn``: Ctrl-C's default in the child, however pytest was started.

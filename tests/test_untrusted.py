@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from subprocs import default_sigint
+from subprocs import COMMANDS, default_sigint
 
 from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock
@@ -391,16 +391,6 @@ def test_an_interrupted_evaluation_leaves_the_old_output(tmp_path, sig):
 
 
 # ---------------------------------------------------------------- every command's --help
-COMMANDS = [
-    "training.ppo.train", "training.evaluation.evaluate", "training.evaluation.compare",
-    "training.paper.open_loop", "training.paper.optimize_open_loop",
-    "training.paper.paper_numerics", "training.paper.table2_study",
-    "training.controller.record_reference", "training.controller.tune",
-    "training.controller.model_controller", "training.ppo.policy_io", "training.ppo.sweep",
-    "benchmarks.accuracy", "benchmarks.bench_ab", "benchmarks.bench_bounds",
-    "benchmarks.bench_core",
-    "benchmarks.bench_env", "benchmarks.bench_ppo", "benchmarks.failure_modes",
-]  # fmt: skip
 
 
 def test_every_command_answers_help_without_side_effects(tmp_path):

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from subprocs import default_sigint
+from subprocs import COMMANDS, default_sigint
 
 from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock, command_output, write_file
@@ -279,7 +279,7 @@ def _start(args: list[str]) -> subprocess.Popen:
                             preexec_fn=default_sigint)  # fmt: skip
 
 
-@pytest.mark.parametrize("module", ["training.ppo.train", "training.evaluation.evaluate"])
+@pytest.mark.parametrize("module", COMMANDS)
 def test_ctrl_c_while_a_command_starts_is_one_line(tmp_path, module):
     """A Ctrl-C during a command's imports (before its ``main``): one line, no traceback.
 
