@@ -198,6 +198,19 @@ def test_a_start_that_read_the_command_normalised_is_folded_exactly_or_refused(t
     write_manifest(bad / which)  # a consistent snapshot, of a network that cannot be folded
     with pytest.raises(SystemExit, match="clipped below 5.0"):
         train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(bad)])
+    # with a fresh normaliser nothing is kept exactly: folded all the same, up to the clip
+    fresh = [*flags, "--out-dir", str(tmp_path / "d"), "--init-from", str(bad),
+             "--init-normalizer", "fresh"]  # fmt: skip
+    assert train_ppo.main(fresh) == 0
+    (run,) = (tmp_path / "d" / "train_ppo").iterdir()
+    new, new_norm, cfg, _ = load_policy(run, "final")
+    old, old_norm, _, _ = load_policy(bad)
+    assert new_norm.mean[-1] == 0.0 and new_norm.var[-1] == 1.0
+    assert new_norm.var[0] != old_norm.var[0]  # the other entries' statistics start anew
+    for net in ("policy_net", "value_net"):  # the command's column: divided by its old scale
+        w_new, w_old = (getattr(p.mlp_extractor, net)[0].weight.detach().numpy()[:, -1]
+                        for p in (new, old))  # fmt: skip
+        np.testing.assert_allclose(w_new, w_old / np.sqrt(old_norm.var[-1] + 1e-8), rtol=1e-4)
 
 
 def test_the_balance_scales_only_the_standing_rows_advantages_by_their_noise_ratio():

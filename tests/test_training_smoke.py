@@ -205,6 +205,38 @@ def test_a_second_stage_starts_from_a_policys_published_snapshot(tmp_path):
         train_ppo.main([*flags, "--out-dir", str(tmp_path / "b"), "--init-from", str(bad)])
 
 
+def test_a_second_stage_with_a_fresh_normaliser_keeps_the_weights_not_the_statistics(tmp_path):
+    from training.ppo import train as train_ppo
+    from training.ppo.policy_io import NORMALIZER_FILE, open_snapshot, read_normalizer
+
+    src = Path(__file__).resolve().parents[1] / "policies" / "ppo_command_stage1_50hz"
+    flags = ["--config", str(src / "config.toml"), "--total-timesteps", "64", "--n-envs", "2",
+             "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1", "--eval-freq", "1000",
+             "--checkpoint-freq", "64", "--progress", "false", "--learning-rate", "1e-12",
+             "--init-from", str(src)]  # fmt: skip
+
+    def statistics(where, which):
+        snap = open_snapshot(where, which)
+        return read_normalizer("n", 27, snap.files[NORMALIZER_FILE])
+
+    old = statistics(src, "best")
+    for mode in ("snapshot", "fresh"):
+        out = tmp_path / mode
+        assert train_ppo.main([*flags, "--out-dir", str(out), "--init-normalizer", mode]) == 0
+        (run,) = (out / "train_ppo").iterdir()
+        assert json.loads((run / "init_from.json").read_text())["normalizer"] == mode
+        new = statistics(run, "final")
+        # the run's own observations: 64 steps and the 2 rows' first resets
+        if mode == "snapshot":  # added to the policy's statistics
+            assert new["obs_count"] - old["obs_count"] == pytest.approx(66)
+        else:  # alone (SB3 starts a count at 1e-4)
+            assert new["obs_count"] == pytest.approx(66, abs=1e-3)
+            assert not np.allclose(new["obs_mean"], old["obs_mean"])
+    with pytest.raises(SystemExit, match="init-normalizer goes with --init-from"):
+        train_ppo.main([*flags[:-2], "--out-dir", str(tmp_path / "x"), "--init-normalizer",
+                        "fresh"])  # fmt: skip
+
+
 def test_tracking_config_trains_evaluates_without_reference_starts_and_compares(
     tmp_path, monkeypatch
 ):

@@ -132,6 +132,9 @@ class PPOConfig:
     init_from: str = ""  # a policy directory whose published snapshot (weights, normaliser)
     # starts this new run: a second stage of training; the network must match; the initial
     # exploration noise is still this config's (log_std_joints, action_std_nm) where it sets one
+    init_normalizer: str = "snapshot"  # with init_from: "snapshot" continues the policy's
+    # observation and return statistics; "fresh" starts them anew from this run's own data
+    # (a stage whose task differs: the earlier task's statistics clip what it never saw)
     progress: bool = True  # progress bars
 
     def validate(self) -> None:
@@ -180,6 +183,8 @@ class PPOConfig:
                 make_settings(**kwargs())
             except (ValueError, TypeError) as e:
                 raise ValueError(f"[{name}]: {e}") from None
+        if self.init_normalizer != "snapshot" and not self.init_from:
+            raise ValueError("--init-normalizer goes with --init-from")
         self._check_start_curriculum()  # on the valid training env
         self._check_restart()
         self._check_stand_noise()
@@ -410,6 +415,7 @@ def _choices() -> dict[str, tuple]:
         "vec": ("batched", "subproc", "dummy"),
         "lr_schedule": ("constant", "linear"),
         "select_by": ("mean", "min", "return"),
+        "init_normalizer": ("snapshot", "fresh"),
         "activation": ACTIVATIONS,
     }
 

@@ -130,23 +130,27 @@ class StandNoisePolicy(ActorCriticPolicy):
         return self.action_dist.proba_distribution(mean, log_std)
 
 
-def fold_pinned_inputs(policy, mean: np.ndarray, var: np.ndarray, eps: float, clip: float) -> list:
+def fold_pinned_inputs(
+    policy, mean: np.ndarray, var: np.ndarray, eps: float, clip: float, exact: bool = True
+) -> list:
     """Make a network that read the :data:`PINNED` entries normalised read them in m/s (in place).
 
     Its first layers (actor and critic) saw ``(x - mean) / sqrt(var + eps)`` there; with those
     inputs' weights divided by the scale and the bias moved by ``-w mean / scale``, they compute
     the same from ``x`` itself: exactly, wherever the old input was not clipped, which holds
     for every value up to the entry's bound in :data:`PINNED` (else ValueError, nothing
-    changed). Left as it is: an entry pinned already (mean 0, variance 1), or one that was only
-    ever 0 (mean 0, variance below 1e-6: every command a zero), which read 0 there as the run
-    will. Returns the entries folded.
+    changed; with ``exact=False``, for a start whose other inputs are normalised afresh and so
+    not kept exactly either, folded all the same: the same up to the clip). Left as it is: an
+    entry pinned already (mean 0, variance 1), or one that was only ever 0 (mean 0, variance
+    below 1e-6: every command a zero), which read 0 there as the run will. Returns the entries
+    folded.
     """
     todo = []
     for i, bound in PINNED.items():
         if mean[i] == 0.0 and (var[i] == 1.0 or var[i] < 1e-6):
             continue
         scale = float(np.sqrt(var[i] + eps))
-        if (bound + abs(mean[i])) / scale >= clip:
+        if exact and (bound + abs(mean[i])) / scale >= clip:
             raise ValueError(f"observation entry {i} was normalised by mean {mean[i]:.3g}, "
                              f"variance {var[i]:.3g} and clipped below {bound} in "
                              f"magnitude")  # fmt: skip

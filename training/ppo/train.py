@@ -186,9 +186,10 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
     """A new run's model from ``cfg.init_from``'s published snapshot (a second stage).
 
     Its weights and its normaliser, checked as any untrusted snapshot (the config's initial
-    exploration noise, where it sets one, then replaces the snapshot's action std); the run
-    records where it started (``init_from.json``: the policy, its snapshot and the weights'
-    SHA-256).
+    exploration noise, where it sets one, then replaces the snapshot's action std; with
+    ``init_normalizer = "fresh"`` the run's normaliser starts anew instead); the run records
+    where it started (``init_from.json``: the policy, its snapshot, the weights' SHA-256 and
+    which normaliser).
     """
     src = Path(cfg.init_from)
     if not src.is_dir():
@@ -204,11 +205,14 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
         raise Refusal(f"train_ppo: error: --init-from: {src} was trained with --stand-std-nm: "
                       f"its network reads the command and the hip speed in m/s; give "
                       f"--stand-std-nm to this run too")  # fmt: skip
-    restore_normalizer(vecnorm, snap)
+    if cfg.init_normalizer == "snapshot":
+        restore_normalizer(vecnorm, snap)
     digest = hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
     run.write("init_from.json", json_text({"policy": str(src), "snapshot": which,
-                                           "policy_sha256": digest}))  # fmt: skip
-    print(f"starting PPO from {src} ({which}/, weights sha256 {digest[:12]})", flush=True)
+                                           "policy_sha256": digest,
+                                           "normalizer": cfg.init_normalizer}))  # fmt: skip
+    print(f"starting PPO from {src} ({which}/, weights sha256 {digest[:12]}, "
+          f"{cfg.init_normalizer} normaliser)", flush=True)  # fmt: skip
     return model
 
 
@@ -237,8 +241,9 @@ def _command_in_m_s(src: Path, snap, cfg: PPOConfig, policy) -> None:
     if not d["norm_obs"]:
         raise UntrustedFileError(f"{snap.name(NORMALIZER_FILE)}: holds no observation statistics")
     try:
+        exact = cfg.init_normalizer == "snapshot"  # a fresh one keeps nothing exactly
         folded = fold_pinned_inputs(policy, d["obs_mean"], d["obs_var"], d["epsilon"],
-                                    d["clip_obs"])  # fmt: skip
+                                    d["clip_obs"], exact=exact)  # fmt: skip
     except ValueError as e:
         raise Refusal(f"train_ppo: error: --stand-std-nm feeds the network the command and the "
                       f"hip speed in m/s; {src}: {e}: start from a random network or another "
