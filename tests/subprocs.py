@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import signal
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 COMMANDS = [  # every command of the package, as `python -m` runs it
     "training.ppo.train", "training.evaluation.evaluate", "training.evaluation.compare",
@@ -24,3 +30,15 @@ def default_sigint() -> None:
     find it running on.
     """
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def start(module: str, args: list[str], cwd: Path = ROOT) -> subprocess.Popen:
+    """``python -m module args`` as a child on one numba thread, its stderr piped to read.
+
+    Its stdout is dropped and Ctrl-C has its default there (:func:`default_sigint`), so a test
+    can interrupt it and read what it said.
+    """
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    return subprocess.Popen([sys.executable, "-m", module, *args], cwd=cwd, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=default_sigint)  # fmt: skip

@@ -8,16 +8,14 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from subprocs import default_sigint
+from subprocs import start
 
 from training.ppo import train as train_ppo
 from training.ppo.policy_io import STATE_FILE, find_snapshot, load_state, write_manifest
@@ -34,16 +32,7 @@ on speed)."""
 
 
 def _start(out: Path, args: list[str]) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "training.ppo.train", "--out-dir", str(out), *args]
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    return subprocess.Popen(
-        cmd,
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        preexec_fn=default_sigint,
-    )
+    return start("training.ppo.train", ["--out-dir", str(out), *args])
 
 
 def _run_dir(out: Path) -> Path:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from subprocs import COMMANDS, default_sigint
+from subprocs import COMMANDS, start
 
 from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock
@@ -349,17 +349,8 @@ def test_a_second_writer_is_refused_naming_the_holder(tmp_path):
 
 # ---------------------------------------------------------------- interrupted evaluations
 def _evaluate_proc(out: Path, cwd: Path) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "training.evaluation.evaluate", str(SCRATCH), "--episodes", "3"]
-    cmd += ["--out", str(out)]
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    return subprocess.Popen(
-        cmd,
-        cwd=cwd,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        preexec_fn=default_sigint,
-    )
+    args = [str(SCRATCH), "--episodes", "3", "--out", str(out)]
+    return start("training.evaluation.evaluate", args, cwd=cwd)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])

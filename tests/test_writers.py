@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from subprocs import COMMANDS, default_sigint
+from subprocs import COMMANDS, start
 
 from training.evaluation import evaluate
 from training.plumbing.outputs import MARKER, OutDir, RunLock, command_output, write_file
@@ -273,10 +273,7 @@ def test_imitation_counters_are_checked(tmp_path):
 
 # ------------------------------------------------------------------ 10: kills and eval rows
 def _start(args: list[str]) -> subprocess.Popen:
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    return subprocess.Popen([sys.executable, "-m", "training.ppo.train", *args], cwd=ROOT,
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            preexec_fn=default_sigint)  # fmt: skip
+    return start("training.ppo.train", args)
 
 
 @pytest.mark.parametrize("module", COMMANDS)
