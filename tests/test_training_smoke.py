@@ -237,6 +237,40 @@ def test_a_second_stage_with_a_fresh_normaliser_keeps_the_weights_not_the_statis
                         "fresh"])  # fmt: skip
 
 
+def test_a_second_stage_that_observes_more_starts_from_the_same_function(tmp_path):
+    from training.ppo import train as train_ppo
+    from training.ppo.policy_io import load_policy, policy_batch_actor
+    from training.ppo.widen import added_entries
+
+    assert added_entries(("phase", "command"), ("phase", "gravity", "command")) == [26, 27]
+    assert added_entries(("command",), ("gravity", "phase", "command")) == [24, 25, 26, 27]
+    with pytest.raises(ValueError, match="in order"):
+        added_entries(("phase", "command"), ("command", "phase"))
+    src = Path(__file__).resolve().parents[1] / "policies" / "ppo_command_stage1_50hz"
+    flags = ["--config", str(src / "config.toml"), "--total-timesteps", "64", "--n-envs", "2",
+             "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1", "--eval-freq", "1000",
+             "--checkpoint-freq", "64", "--progress", "false", "--learning-rate", "1e-12",
+             "--init-from", str(src)]  # fmt: skip
+    gravity = ["--env", 'observation=["phase", "gravity"]']
+    assert train_ppo.main([*flags, *gravity, "--out-dir", str(tmp_path / "a")]) == 0
+    (run,) = (tmp_path / "a" / "train_ppo").iterdir()
+    assert json.loads((run / "init_from.json").read_text())["added_inputs"] == [26, 27]
+    new, new_norm, cfg, _ = load_policy(run, "final")
+    old, old_norm, old_cfg, _ = load_policy(src)
+    assert cfg.obs_dim() == 29 and old_cfg.obs_dim() == 27
+    rng = np.random.default_rng(0)
+    obs = rng.normal(0.0, 1.0, (64, 27)) * np.sqrt(old_norm.var) + old_norm.mean
+    slope = rng.uniform(-0.1, 0.1, 64)
+    wide = np.concatenate([obs[:, :26], -np.sin(slope)[:, None], -np.cos(slope)[:, None],
+                           obs[:, 26:]], axis=1)  # fmt: skip
+    a_new = policy_batch_actor(new, new_norm, cfg)(wide)
+    a_old = policy_batch_actor(old, old_norm, old_cfg)(obs)
+    assert np.abs(a_new - a_old).max() < 1e-3  # N m: the same function, gravity read with weight 0
+    dropped = ["--env", 'observation=["gravity"]']  # the start read the clock: not a widening
+    with pytest.raises(SystemExit, match="do not hold the start's"):
+        train_ppo.main([*flags, *dropped, "--out-dir", str(tmp_path / "b")])
+
+
 def test_tracking_config_trains_evaluates_without_reference_starts_and_compares(
     tmp_path, monkeypatch
 ):

@@ -195,7 +195,17 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
     if not src.is_dir():
         raise Refusal(f"train_ppo: error: --init-from: {src}: no such policy directory")
     which, _ = published_snapshot(src)
-    snap = open_snapshot(src, which)
+    snap = original = open_snapshot(src, which)
+    added = _added_entries(src, cfg)
+    if added:
+        from training.ppo.widen import widen_snapshot
+
+        try:
+            snap = widen_snapshot(snap, added)
+        except ValueError as e:
+            raise Refusal(f"train_ppo: error: --init-from: {e}") from None
+        print(f"the start's network widened with zero columns for observation entries "
+              f"{added}", flush=True)  # fmt: skip
     check_weights(cfg, snap)
     model = make_model(cfg, vecnorm, fs)
     load_weights(model.policy, snap)
@@ -207,13 +217,34 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
                       f"--stand-std-nm to this run too")  # fmt: skip
     if cfg.init_normalizer == "snapshot":
         restore_normalizer(vecnorm, snap)
-    digest = hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
+    digest = hashlib.sha256(original.files[POLICY_FILE]).hexdigest()
     run.write("init_from.json", json_text({"policy": str(src), "snapshot": which,
                                            "policy_sha256": digest,
-                                           "normalizer": cfg.init_normalizer}))  # fmt: skip
+                                           "normalizer": cfg.init_normalizer,
+                                           "added_inputs": added}))  # fmt: skip
     print(f"starting PPO from {src} ({which}/, weights sha256 {digest[:12]}, "
           f"{cfg.init_normalizer} normaliser)", flush=True)  # fmt: skip
     return model
+
+
+def _added_entries(src: Path, cfg: PPOConfig) -> list[int]:
+    """The observation entries this run adds to its start's (``training.ppo.widen``).
+
+    None where the start's config observes the same blocks, or where the start has no config.
+    """
+    from training.ppo.widen import added_entries
+
+    try:
+        old = read_config(src).settings().observation.blocks
+    except FileNotFoundError:
+        return []
+    new = cfg.settings().observation.blocks
+    if old == new:
+        return []
+    try:
+        return added_entries(old, new)
+    except ValueError as e:
+        raise Refusal(f"train_ppo: error: --init-from: {src}: {e}") from None
 
 
 def _stand_trained(src: Path) -> bool:

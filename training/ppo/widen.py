@@ -1,0 +1,86 @@
+"""A later stage that observes more: the start's network widened with zero input columns.
+
+A stage whose env adds observation blocks to its start's (``observation=["phase",
+"gravity"]`` after a policy trained on ``["phase"]``: legged-robot RL's projected gravity) starts
+from the start's weights with a zero column in both first layers (actor and critic) for every
+added entry, and with those entries' statistics at mean 0 and variance 1 in the normaliser (they
+are read as they are until the run's own data moves them). The widened network computes
+exactly what the start computed, whatever the added entries hold; PPO then learns their weights
+like any other. Nothing else changes shape, so the checks of any snapshot then apply
+(:func:`training.ppo.policy_io.check_weights` and what follows).
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from biped_constraint_env.observation import OBS_LOW, OBSERVATION_BLOCKS
+from training.plumbing.safe_files import Snapshot, load_safetensors
+
+FIRST_LAYERS = ("mlp_extractor.policy_net.0.weight", "mlp_extractor.value_net.0.weight")
+"""The weights that read the observation (after the normaliser): (hidden, observation)."""
+
+
+def added_entries(old: tuple[str, ...], new: tuple[str, ...]) -> list[int]:
+    """The indices of the entries that the blocks ``new`` add to the blocks ``old``.
+
+    ``new`` must hold every block of ``old`` in the same order, with blocks inserted anywhere
+    (ValueError otherwise: a stage that drops or reorders what its start read is not a widening).
+    """
+    at, out, kept = len(OBS_LOW), [], 0
+    for b in new:
+        size = len(OBSERVATION_BLOCKS[b].names)
+        if kept < len(old) and old[kept] == b:
+            kept += 1
+        else:
+            out.extend(range(at, at + size))
+        at += size
+    if kept != len(old):
+        raise ValueError(f"the observation's blocks {list(new)} do not hold the start's "
+                         f"{list(old)} in order")  # fmt: skip
+    return out
+
+
+def _insert(a: np.ndarray, added: list[int], value: float, axis: int) -> np.ndarray:
+    """``a`` with ``value`` at the indices ``added`` of the result along ``axis``."""
+    n = a.shape[axis] + len(added)
+    keep = np.setdiff1d(np.arange(n), added)
+    shape = list(a.shape)
+    shape[axis] = n
+    out = np.full(shape, value, dtype=a.dtype)
+    index = [slice(None)] * a.ndim
+    index[axis] = keep
+    out[tuple(index)] = a
+    return out
+
+
+def widen_snapshot(snap: Snapshot, added: list[int]) -> Snapshot:
+    """An in-memory copy of ``snap`` whose network and normaliser read the ``added`` entries.
+
+    The policy's first layers gain zero columns at ``added``, the observation statistics
+    mean 0 and variance 1 there; every other file is the snapshot's own. ValueError where the
+    snapshot's network has no such first layers (an in-network normaliser).
+    """
+    import torch
+    from safetensors.torch import save
+
+    from training.ppo.policy_io import NORMALIZER_FILE, POLICY_FILE, read_normalizer
+
+    tensors = load_safetensors(snap.name(POLICY_FILE), snap.files[POLICY_FILE])
+    if not all(k in tensors and tensors[k].dim() == 2 for k in FIRST_LAYERS):
+        raise ValueError(f"{snap.path}: no first layers {FIRST_LAYERS} to widen")
+    for k in FIRST_LAYERS:
+        tensors[k] = torch.from_numpy(_insert(tensors[k].numpy(), added, 0.0, axis=1))
+    files = dict(snap.files)
+    files[POLICY_FILE] = save({k: v.contiguous() for k, v in tensors.items()})
+    if NORMALIZER_FILE in snap:
+        d = read_normalizer(snap.name(NORMALIZER_FILE), data=snap.files[NORMALIZER_FILE])
+        if d["norm_obs"]:
+            d["obs_mean"] = _insert(d["obs_mean"], added, 0.0, axis=0)
+            d["obs_var"] = _insert(d["obs_var"], added, 1.0, axis=0)
+        buf = io.BytesIO()
+        np.savez(buf, **{k: np.asarray(v, dtype=np.float64) for k, v in d.items()})
+        files[NORMALIZER_FILE] = buf.getvalue()
+    return Snapshot(snap.path, files)
