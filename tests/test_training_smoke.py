@@ -258,6 +258,9 @@ def test_a_second_stage_that_observes_more_starts_from_the_same_function(tmp_pat
     new, new_norm, cfg, _ = load_policy(run, "final")
     old, old_norm, old_cfg, _ = load_policy(src)
     assert cfg.obs_dim() == 29 and old_cfg.obs_dim() == 27
+    # the added entries' statistics from the training env's starts: flat ground in stage 1
+    np.testing.assert_allclose(new_norm.mean[26:28], [0.0, -1.0], atol=1e-9)
+    np.testing.assert_allclose(new_norm.var[26:28], [1e-6, 1e-6], rtol=1e-3)  # + 66 samples
     rng = np.random.default_rng(0)
     obs = rng.normal(0.0, 1.0, (64, 27)) * np.sqrt(old_norm.var) + old_norm.mean
     slope = rng.uniform(-0.1, 0.1, 64)

@@ -113,7 +113,7 @@ def training_env(
     """
     from stable_baselines3.common.vec_env import VecNormalize
 
-    venv = _monitored_env(cfg, seed, monitor_file, env_threads)
+    venv = monitored_env(cfg, seed, monitor_file, env_threads)
     vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
     if cfg.stand_std_nm > 0:
         from training.ppo.exploration import pin_command
@@ -122,7 +122,7 @@ def training_env(
     return venv, vecnorm
 
 
-def _monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads):
+def monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads):
     """The config's SB3 VecEnv under a VecMonitor (:func:`training_env`'s inner env)."""
     from stable_baselines3.common.vec_env import VecMonitor
 

@@ -201,7 +201,7 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
         from training.ppo.widen import widen_snapshot
 
         try:
-            snap = widen_snapshot(snap, added)
+            snap = widen_snapshot(snap, added, *_added_statistics(cfg, added))
         except ValueError as e:
             raise Refusal(f"train_ppo: error: --init-from: {e}") from None
         print(f"the start's network widened with zero columns for observation entries "
@@ -245,6 +245,28 @@ def _added_entries(src: Path, cfg: PPOConfig) -> list[int]:
         return added_entries(old, new)
     except ValueError as e:
         raise Refusal(f"train_ppo: error: --init-from: {src}: {e}") from None
+
+
+ADDED_STATISTICS_SEED = 900_000
+"""The seeds (+ the run's seed) of the resets that give added inputs their first statistics:
+a range no protocol reads (report 500000+, development 700000+, selection 10000+)."""
+
+
+def _added_statistics(cfg: PPOConfig, added: list[int], resets: int = 16):
+    """The mean and variance of the ``added`` entries over ``resets`` x n_envs start states.
+
+    From a separate instance of the run's training env (its own seeds,
+    :data:`ADDED_STATISTICS_SEED`), so the run's own draws are untouched; a variance floor of
+    1e-6 keeps an entry constant over the starts finite.
+    """
+    from training.ppo.build import monitored_env
+
+    venv = monitored_env(cfg, ADDED_STATISTICS_SEED + cfg.seed, None, 1)
+    try:
+        obs = np.concatenate([venv.reset() for _ in range(resets)])[:, added]
+    finally:
+        venv.close()
+    return obs.mean(axis=0), np.maximum(obs.var(axis=0), 1e-6)
 
 
 def _stand_trained(src: Path) -> bool:

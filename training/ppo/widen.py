@@ -3,8 +3,9 @@
 A stage whose env adds observation blocks to its start's (``observation=["phase",
 "gravity"]`` after a policy trained on ``["phase"]``: legged-robot RL's projected gravity) starts
 from the start's weights with a zero column in both first layers (actor and critic) for every
-added entry, and with those entries' statistics at mean 0 and variance 1 in the normaliser (they
-are read as they are until the run's own data moves them). The widened network computes
+added entry, and with those entries' statistics in the normaliser taken from reset observations
+of the run's own training env (a separate instance, seeds of no protocol): read at about unit
+scale from the start, as every other input. The widened network computes
 exactly what the start computed, whatever the added entries hold; PPO then learns their weights
 like any other. Nothing else changes shape, so the checks of any snapshot then apply
 (:func:`training.ppo.policy_io.check_weights` and what follows).
@@ -56,13 +57,18 @@ def _insert(a: np.ndarray, added: list[int], value: float, axis: int) -> np.ndar
     return out
 
 
-def widen_snapshot(snap: Snapshot, added: list[int]) -> Snapshot:
+def widen_snapshot(
+    snap: Snapshot, added: list[int], mean: np.ndarray | None = None, var: np.ndarray | None = None
+) -> Snapshot:
     """An in-memory copy of ``snap`` whose network and normaliser read the ``added`` entries.
 
     The policy's first layers gain zero columns at ``added``, the observation statistics
-    mean 0 and variance 1 there; every other file is the snapshot's own. ValueError where the
-    snapshot's network has no such first layers (an in-network normaliser).
+    ``mean`` and ``var`` there (default 0 and 1); every other file is the snapshot's own.
+    ValueError where the snapshot's network has no such first layers (an in-network
+    normaliser).
     """
+    mean = np.zeros(len(added)) if mean is None else np.asarray(mean, dtype=np.float64)
+    var = np.ones(len(added)) if var is None else np.asarray(var, dtype=np.float64)
     import torch
     from safetensors.torch import save
 
@@ -80,6 +86,7 @@ def widen_snapshot(snap: Snapshot, added: list[int]) -> Snapshot:
         if d["norm_obs"]:
             d["obs_mean"] = _insert(d["obs_mean"], added, 0.0, axis=0)
             d["obs_var"] = _insert(d["obs_var"], added, 1.0, axis=0)
+            d["obs_mean"][added], d["obs_var"][added] = mean, var
         buf = io.BytesIO()
         np.savez(buf, **{k: np.asarray(v, dtype=np.float64) for k, v in d.items()})
         files[NORMALIZER_FILE] = buf.getvalue()
