@@ -19,6 +19,8 @@ scale = np.sqrt(norm.var + 1e-8)
 a = np.radians(5.0)
 d_gravity = np.array([-np.sin(a), 1.0 - np.cos(a)])  # (-sin a, -cos a) minus flat (0, -1)
 change = np.abs(w[:, 26:28] / scale[26:28] @ d_gravity)
-print(f"{which}: gravity entries' statistics mean {norm.mean[26:28]}, std {scale[26:28]}; "
-      f"a 5 deg slope moves the preactivations by {change.mean():.4f} on average, "
-      f"{change.max():.4f} at most")
+print(
+    f"{which}: gravity entries' statistics mean {norm.mean[26:28]}, std {scale[26:28]}; "
+    f"a 5 deg slope moves the preactivations by {change.mean():.4f} on average, "
+    f"{change.max():.4f} at most"
+)

@@ -2,6 +2,7 @@
 
 python protocol_dev.py RUN {best,final} N  -> markdown on stdout (seeds 700000..700000+N-1)
 """
+
 import pathlib
 import sys
 
@@ -17,6 +18,8 @@ act = policy_batch_actor(policy, norm, cfg)
 seeds = list(range(700000, 700000 + n))
 rows = cp.run_protocol(act, cfg.env_kwargs(), seeds, cfg.env_id)
 rows += cp.slope_rows(act, cfg.env_kwargs(), seeds, cfg.env_id)
-print(f"# protocol of {which}/ on {n} development episodes (seeds 700000-{700000 + n - 1}), "
-      f"with the slope rows\n")
+print(
+    f"# protocol of {which}/ on {n} development episodes (seeds 700000-{700000 + n - 1}), "
+    f"with the slope rows\n"
+)
 print(cp.markdown(rows))
