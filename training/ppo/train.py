@@ -200,8 +200,13 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
     if added:
         from training.ppo.widen import widen_snapshot
 
+        statistics = (
+            _added_statistics(cfg, added)
+            if cfg.init_normalizer == "snapshot"
+            else (np.zeros(len(added)), np.ones(len(added)))
+        )  # fresh: not read
         try:
-            snap = widen_snapshot(snap, added, *_added_statistics(cfg, added))
+            snap = widen_snapshot(snap, added, *statistics)
         except ValueError as e:
             raise Refusal(f"train_ppo: error: --init-from: {e}") from None
         print(f"the start's network widened with zero columns for observation entries "

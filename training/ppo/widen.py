@@ -44,31 +44,18 @@ def added_entries(old: tuple[str, ...], new: tuple[str, ...]) -> list[int]:
     return out
 
 
-def _insert(a: np.ndarray, added: list[int], value: float, axis: int) -> np.ndarray:
-    """``a`` with ``value`` at the indices ``added`` of the result along ``axis``."""
-    n = a.shape[axis] + len(added)
-    keep = np.setdiff1d(np.arange(n), added)
-    shape = list(a.shape)
-    shape[axis] = n
-    out = np.full(shape, value, dtype=a.dtype)
-    index = [slice(None)] * a.ndim
-    index[axis] = keep
-    out[tuple(index)] = a
-    return out
+def _insert(a: np.ndarray, added: list[int], values, axis: int) -> np.ndarray:
+    """``a`` with ``values`` at the (sorted) indices ``added`` of the result along ``axis``."""
+    return np.insert(a, [k - i for i, k in enumerate(added)], values, axis=axis)
 
 
-def widen_snapshot(
-    snap: Snapshot, added: list[int], mean: np.ndarray | None = None, var: np.ndarray | None = None
-) -> Snapshot:
+def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.ndarray) -> Snapshot:
     """An in-memory copy of ``snap`` whose network and normaliser read the ``added`` entries.
 
     The policy's first layers gain zero columns at ``added``, the observation statistics
-    ``mean`` and ``var`` there (default 0 and 1); every other file is the snapshot's own.
-    ValueError where the snapshot's network has no such first layers (an in-network
-    normaliser).
+    ``mean`` and ``var`` there; every other file is the snapshot's own. ValueError where the
+    snapshot's network has no such first layers (an in-network normaliser).
     """
-    mean = np.zeros(len(added)) if mean is None else np.asarray(mean, dtype=np.float64)
-    var = np.ones(len(added)) if var is None else np.asarray(var, dtype=np.float64)
     import torch
     from safetensors.torch import save
 
@@ -84,9 +71,8 @@ def widen_snapshot(
     if NORMALIZER_FILE in snap:
         d = read_normalizer(snap.name(NORMALIZER_FILE), data=snap.files[NORMALIZER_FILE])
         if d["norm_obs"]:
-            d["obs_mean"] = _insert(d["obs_mean"], added, 0.0, axis=0)
-            d["obs_var"] = _insert(d["obs_var"], added, 1.0, axis=0)
-            d["obs_mean"][added], d["obs_var"][added] = mean, var
+            d["obs_mean"] = _insert(d["obs_mean"], added, mean, axis=0)
+            d["obs_var"] = _insert(d["obs_var"], added, var, axis=0)
         buf = io.BytesIO()
         np.savez(buf, **{k: np.asarray(v, dtype=np.float64) for k, v in d.items()})
         files[NORMALIZER_FILE] = buf.getvalue()
