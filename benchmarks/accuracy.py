@@ -23,10 +23,6 @@ evaluations per simulated second (counted in the solver).
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import json
 import time
 from pathlib import Path

@@ -15,10 +15,6 @@ commit before.
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import json
 import os
 import subprocess

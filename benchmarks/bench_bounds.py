@@ -12,10 +12,6 @@ prints the CPU seconds per 30 simulated seconds.
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import time
 
 from training.plumbing.common import CliParser, command

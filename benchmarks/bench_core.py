@@ -11,10 +11,6 @@ Also checks M and the bias against Pinocchio (printed, not asserted).
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import time
 
 import numpy as np

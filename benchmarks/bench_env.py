@@ -25,10 +25,6 @@ from rest at the rest pose until the swing foot lands (``--pd-only``: these rows
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import os
 import time
 

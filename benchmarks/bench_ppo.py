@@ -31,10 +31,6 @@ are short, so these rows include many resets, as a real run's first minutes do.
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import argparse
 import tempfile
 import time

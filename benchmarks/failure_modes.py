@@ -21,10 +21,6 @@
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import dataclasses
 import json
 from pathlib import Path

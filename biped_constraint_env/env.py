@@ -124,15 +124,19 @@ class ConstrainedBipedEnv(gym.Env):
     model 4 at rest, both feet down (:func:`~.starts.stand_start`: the front foot flat, the
     rear foot on its toe 0.85-1.15 m behind the front toe with its heel up 0.05-0.2 rad, the
     hip 0.45-0.75 m behind the front toe at 2.65-2.8 m, knees bent forward; ``STAND_*`` in
-    :mod:`.starts`): standing. ``start="nudge"``: the rest start's posture in model 1 with the
-    stance leg turning about the ankle at a rate uniform in ``NUDGE_RATE_RANGE_RAD_S``
+    :mod:`.starts`): standing. ``start="brake"``: the standing start's draw moving, its hip
+    forward at 0-0.8 m/s (``BRAKE_HIP_SPEED_RANGE_M_S``), the front foot flat, the rear toe
+    still and the rear foot keeping its angle (:func:`~.starts.stand_rates`: model 4's
+    constraints hold exactly): the states a walk stops from. ``start="nudge"``: the rest
+    start's posture in model 1 with the stance leg turning about the ankle at a rate uniform in
+    ``NUDGE_RATE_RANGE_RAD_S``
     (-0.6 to 0.2 rad/s: forward, or slowly backward), the swing thigh keeping its direction: the
     states around rest and between rest and walking, for learning to start. A dict of weights
     mixes them, one uniform draw first picking the component (``{"stride": 0.75,
     "midstride": 0.25}``; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``). The
     ``"reference"`` component starts at a recorded state of the reference walk (below;
     ``start="reference"``: every start), drawn first by a draw of its own, the other
-    components then as a start of their own. All but "stand" (its rear toe on
+    components then as a start of their own. All but "stand" and "brake" (the rear toe on
     the ground exactly) add uniform noise in ``[-s, s]`` (``start={"reset_noise_scale": s}``,
     0.01 rad) to q1..q5; the stance toe is at y = 0.
     ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})`` starts from any state in
@@ -193,7 +197,8 @@ class ConstrainedBipedEnv(gym.Env):
     | start | "midstride" | a start's name (Starting State), a dict of component weights, or |
     | | | a dict: "kind" (either), "posture" (``NOMINAL_POSTURE_RAD``: the rest posture [rad]), |
     | | | "reset_noise_scale" (0.01: noise on q1..q5 [rad]); the components "rest", |
-    | | | "midstride", "stride", "stand", "reference" (recorded reference states) |
+    | | | "midstride", "stride", "stand", "brake", "nudge", "reference" (recorded reference |
+    | | | states) |
     | reward | "env" | "env" (Rewards), "tracking" (a reference walk's; below), "gait" (the task |
     | | | and the contact clock, no recording; below), "command", or {"kind", "weights", |
     | | | "kernels", "targets", "gated", "first_phase_s"}: any term's weight, kernel or |
@@ -323,7 +328,8 @@ class ConstrainedBipedEnv(gym.Env):
       models 1-3 (it was the hip-speed kernel in every model); ``max_model_time_s`` counts a
       contact phase's periods under a speed command only (a restart from standing has the
       whole limit). Added: the command reward's ``effort`` term (weight 0: off); the
-      ``"stand"`` start (model 4 at rest, both feet down); the ``"nudge"`` start (its rates
+      ``"stand"`` start (model 4 at rest, both feet down) and the ``"brake"`` start (the
+      same, moving forward at 0-0.8 m/s); the ``"nudge"`` start (its rates
       -0.6 to 0.2 rad/s: rest inside them). Changed: the
       reference-state
       starts are the start mixture's ``"reference"`` component (``start={"kind": "mixed",

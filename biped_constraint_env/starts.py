@@ -9,7 +9,8 @@ import numpy as np
 
 from .advance import nb_start_batch
 from .hybrid import wrap_angles
-from .model import COL_ANGLE, N_LINKS, BipedParams
+from .kinematics import point_jacobian
+from .model import COL_ANGLE, N_LINKS, SC_TOE5, BipedParams
 from .modes import Mode
 from .simulator import SimArrays, SimOptions, SimState, keypoints
 from .validation import check_array, check_choice, check_int, check_mapping, check_real
@@ -43,6 +44,9 @@ STAND_TOE_Y_RANGE_M = (-1.15, -0.85)
 """Range of the rear toe's position at a standing start, from the front toe [m]."""
 STAND_HEEL_UP_RANGE_RAD = (0.05, 0.2)
 """Range of the rear foot's heel-up angle at a standing start [rad]."""
+BRAKE_HIP_SPEED_RANGE_M_S = (0.0, 0.8)
+"""Range of the hip's forward speed at a braking start [m/s]: the standing start moving, from
+at rest to a little faster than the command walkers walk on at a zero command (0.4-0.8 m/s)."""
 NUDGE_RATE_RANGE_RAD_S = (-0.6, 0.2)
 """Range of the stance leg's turning rate about the ankle at a nudge start [rad/s] (< 0:
 forward): from the flat-foot stride start's fastest to a slow turn backward, so that the rest
@@ -232,14 +236,46 @@ def stand_start(
     return wrap_angles(rel)
 
 
-def _stand(rng, posture, params):
-    """:func:`stand_start` with its hip and rear foot drawn, at rest in model 4."""
+def stand_rates(params: BipedParams, q: np.ndarray, hip_vy: float) -> np.ndarray:
+    """The joint rates qd (6,) [rad/s] of model-4 stance ``q`` moving with its hip at (hip_vy, 0).
+
+    Model 4's constraints hold exactly to round-off: the front foot stays flat (qd[0] = 0) and
+    the rear toe still; the rear foot keeps its heel-up angle (its rate 0), which leaves the
+    hip's velocity (hip_vy [m/s] forward, 0 up) to fix the other rates: one linear solve.
+    """
+    chain = params.chain(0)
+    rows = np.zeros((N_LINKS, N_LINKS))
+    rhs = np.zeros(N_LINKS)
+    rows[0, 0] = 1.0  # the front foot flat
+    rows[1:3] = point_jacobian(chain, q, 5, float(chain.packed_scalars[SC_TOE5]))  # rear toe
+    rows[3:5] = point_jacobian(chain, q, 3, 0.0)  # the hip (link 3's origin)
+    rhs[3] = hip_vy
+    rows[5] = 1.0  # the rear foot's absolute rate: the sum of the relative rates
+    qd = np.linalg.solve(rows, rhs)
+    qd[0] = 0.0
+    return qd
+
+
+def _stand_posture(rng, params):
     hip_y = _uniform(rng, *STAND_HIP_Y_RANGE_M)
     hip_z = _uniform(rng, *STAND_HIP_Z_RANGE_M)
     toe_y = _uniform(rng, *STAND_TOE_Y_RANGE_M)
     heel_up = _uniform(rng, *STAND_HEEL_UP_RANGE_RAD)
-    q = stand_start(params, hip_y, hip_z, toe_y, heel_up)
-    return q, np.zeros(N_LINKS), _DOUBLE_SUPPORT
+    return stand_start(params, hip_y, hip_z, toe_y, heel_up)
+
+
+def _stand(rng, posture, params):
+    """:func:`stand_start` with its hip and rear foot drawn, at rest in model 4."""
+    return _stand_posture(rng, params), np.zeros(N_LINKS), _DOUBLE_SUPPORT
+
+
+def _brake(rng, posture, params):
+    """The standing start's draw moving, its hip forward (:func:`stand_rates`).
+
+    The speed uniform in :data:`BRAKE_HIP_SPEED_RANGE_M_S`: the states a walk stops from.
+    """
+    q = _stand_posture(rng, params)
+    return q, stand_rates(params, q, _uniform(rng, *BRAKE_HIP_SPEED_RANGE_M_S)), _DOUBLE_SUPPORT
 
 
 def _nudge(rng, posture, params):
@@ -256,11 +292,11 @@ def _nudge(rng, posture, params):
 
 
 START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride, "stand": _stand,
-                    "nudge": _nudge}  # fmt: skip
+                    "nudge": _nudge, "brake": _brake}  # fmt: skip
 """The start components by name: each draws (q, qd, mode) from a row's generator, the rest
 posture and the robot, before the reset noise. A new start is one entry here (``start`` or a
 mixture ``start={"stride": 0.75, "midstride": 0.25}`` names it)."""
-EXACT_STARTS = frozenset({"stand"})
+EXACT_STARTS = frozenset({"stand", "brake"})
 """Components whose state meets a contact constraint exactly: no reset noise (their draws vary
 them)."""
 

@@ -91,6 +91,40 @@ def test_stand_start_is_an_exact_double_support_at_rest_in_both_envs():
     np.testing.assert_allclose(kp["swing_toe"], [-1.0, 0.0], atol=1e-12)
 
 
+def test_brake_start_is_the_stand_moving_within_model_4_in_both_envs():
+    """``start="brake"``: the standing start's postures with the hip moving forward at 0-0.8 m/s,
+    the front foot flat and the rear toe still (model 4's constraints on the rates, exactly)."""
+    from biped_constraint_env.kinematics import point_velocity
+    from biped_constraint_env.model import SC_TOE5
+    from biped_constraint_env.starts import BRAKE_HIP_SPEED_RANGE_M_S, stand_rates, stand_start
+
+    env = gym.make("ConstrainedBiped-v0", start="brake").unwrapped
+    venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
+                        start="brake")  # fmt: skip
+    vobs, _ = venv.reset(seed=5)
+    chain = env.params.chain(0)
+    toe = float(chain.packed_scalars[SC_TOE5])
+    speeds = []
+    for i in range(4):
+        obs, info = env.reset(seed=5 + i)
+        np.testing.assert_array_equal(obs, vobs[i])
+        st = env.state
+        assert info["mode"] == 4 and st.q[0] == 0.0 and st.qd[0] == 0.0
+        np.testing.assert_allclose(point_velocity(chain, st.q, st.qd, 5, toe), 0.0, atol=1e-12)
+        hip_v = point_velocity(chain, st.q, st.qd, 3, 0.0)
+        assert abs(hip_v[1]) < 1e-12 and abs(sum(st.qd)) < 1e-12  # level; the rear foot still
+        assert BRAKE_HIP_SPEED_RANGE_M_S[0] <= hip_v[0] <= BRAKE_HIP_SPEED_RANGE_M_S[1]
+        speeds.append(hip_v[0])
+    assert len(set(speeds)) == 4 and max(speeds) > 0.0  # drawn per row
+    q = stand_start(env.params, -0.6, 2.75, -1.0, 0.1)
+    qd = stand_rates(env.params, q, 0.5)
+    np.testing.assert_allclose(point_velocity(chain, q, qd, 3, 0.0), [0.5, 0.0], atol=1e-12)
+    # a second route: the rates are the stance's own motion, the postures 0.1 ms either side
+    h = 1e-4
+    ahead, behind = (stand_start(env.params, -0.6 + s * 0.5 * h, 2.75, -1.0, 0.1) for s in (1, -1))
+    np.testing.assert_allclose((ahead - behind) / (2 * h), qd, atol=1e-7)
+
+
 def _first_step(ctl, env_kw, seed=0, limit_s=5.0):
     env = gym.make("ConstrainedBiped-v0", **env_kw)
     obs, info = env.reset(seed=seed)

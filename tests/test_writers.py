@@ -277,29 +277,43 @@ def _start(args: list[str]) -> subprocess.Popen:
 
 
 @pytest.mark.parametrize("module", COMMANDS)
-def test_ctrl_c_while_a_command_starts_is_one_line(tmp_path, module):
+def test_ctrl_c_while_a_command_starts_is_one_line(module):
     """A Ctrl-C during a command's imports (before its ``main``): one line, no traceback.
 
-    The command imports the hook first (checked in its source); the hook, in a program that
-    is one of the package's command files, shows an uncaught KeyboardInterrupt as one line.
+    The command's package imports the hook first (checked in its ``__init__``), so the hook is
+    in place before the command module's own imports; in a program started as ``python -m``
+    on one of the packages' modules, it shows an uncaught KeyboardInterrupt as one line.
     """
-    path = ROOT / (module.replace(".", "/") + ".py")
-    tree = ast.parse(path.read_text())
+    package = module.split(".")[0]
+    tree = ast.parse((ROOT / package / "__init__.py").read_text())
     first = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
-    first = [n for n in first if not (isinstance(n, ast.ImportFrom) and n.module == "__future__")]
     assert isinstance(first[0], ast.Import)
     assert first[0].names[0].name == "training.plumbing.interrupts"
-    code = (f"import sys; sys.argv = [{str(path)!r}]; import training.plumbing.interrupts; "
+    code = (f"import sys; sys.orig_argv = [sys.executable, '-m', {module!r}]; import {package}; "
             "raise KeyboardInterrupt")  # fmt: skip
     p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
                        timeout=120)  # fmt: skip
     assert p.returncode != 0 and "Traceback" not in p.stderr, p.stderr
-    name = path.stem
+    name = module.rsplit(".", 1)[-1]
     assert p.stderr.strip() == f"{name}: interrupted while starting; nothing was written"
-    p = subprocess.run([sys.executable, "-c", "import training.plumbing.interrupts; "
-                        "raise KeyboardInterrupt"], cwd=ROOT, capture_output=True, text=True,
-                       timeout=120)  # fmt: skip
-    assert "Traceback" in p.stderr  # imported as a library, nothing changes
+
+
+def test_ctrl_c_hook_leaves_a_library_user_alone():
+    """Imported by another program (``python -c``, pytest, ``python -m`` on another package),
+    the hook changes nothing: a KeyboardInterrupt keeps its traceback."""
+    from training.plumbing.interrupts import command_name
+
+    assert command_name(["python", "-m", "training.ppo.train", "--seed", "1"]) == "train"
+    assert command_name(["python", "-X", "utf8", "-m", "benchmarks.bench_env"]) == "bench_env"
+    assert command_name(["python", "-m", "pytest", "-m", "training.x"]) is None
+    assert command_name(["python", "-c", "import training"]) is None
+    assert command_name(["python", "-m"]) is None
+    for code in ("import training; raise KeyboardInterrupt",
+                 "import sys; sys.orig_argv = [sys.executable, '-m', 'pytest']; import training; "
+                 "raise KeyboardInterrupt"):  # fmt: skip
+        p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                           text=True, timeout=120)  # fmt: skip
+        assert "Traceback" in p.stderr, p.stderr
 
 
 def test_a_kill_campaign_leaves_exactly_the_final_runs_evaluations(tmp_path):

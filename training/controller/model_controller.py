@@ -33,10 +33,6 @@ it does.
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import argparse
 import json
 from pathlib import Path

@@ -13,10 +13,6 @@ The shipped files are in ``biped_constraint_env/data`` (the default ``--out``).
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 from pathlib import Path
 
 import numpy as np

@@ -38,10 +38,6 @@ switches it still lacked. A candidate's cost is its worst start's; the best is
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import argparse
 import csv
 import io

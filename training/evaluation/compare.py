@@ -17,10 +17,6 @@ reference and the env do without a network).
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import argparse
 import time
 from dataclasses import asdict, replace

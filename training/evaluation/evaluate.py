@@ -28,10 +28,6 @@ POLICY_DIR is unpickled (:mod:`training.ppo.policy_io`).
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import time
 from collections.abc import Sequence
 from dataclasses import replace

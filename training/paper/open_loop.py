@@ -18,10 +18,6 @@ Fig. 6), ``figures/modes.png`` (Fig. 7) and ``figures/walk.gif`` into a fresh ru
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass

@@ -24,10 +24,6 @@ and from 10 seeds of the env's reset noise around it.
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import dataclasses
 import json
 from collections.abc import Sequence

@@ -13,10 +13,6 @@ each records, and plots the model against time for the three (figures/paper_vs_r
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import dataclasses
 import json
 from collections.abc import Sequence

@@ -24,10 +24,6 @@ Writes summary.json, readings.csv.gz and figures/ (histogram, end reasons) into 
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import csv
 import gzip
 import io

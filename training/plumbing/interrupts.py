@@ -2,33 +2,44 @@
 
 A command's ``main`` turns Ctrl-C into one line (:func:`training.plumbing.common.command`),
 but its module's imports (torch, numba's cache) run before ``main``: a Ctrl-C there would print
-a traceback. Imported first by each command module; when that module is the program being
-run (``python -m training.ppo.train``, whose ``sys.argv[0]`` is the module's file), an
-uncaught KeyboardInterrupt is shown as one line. Imported as a library, nothing changes.
-Imports nothing but the standard library.
+a traceback. The ``training`` and ``benchmarks`` packages import this module first, so it runs
+before any command module's own imports. When the program is one of the packages' commands
+(``python -m training.ppo.train``: ``sys.orig_argv`` names the module), an uncaught
+KeyboardInterrupt is shown as one line naming the command. Imported as a library, nothing
+changes. Imports nothing but the standard library.
 """
 
 from __future__ import annotations
 
-import os
 import sys
 
-_PACKAGE_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PACKAGES = ("training", "benchmarks")
+"""The packages whose modules are commands (``python -m PACKAGE.…``)."""
 
 
-def _is_our_command(argv0: str) -> bool:
-    path = os.path.abspath(argv0)
-    return path.endswith(".py") and os.path.commonpath([path, _PACKAGE_ROOT]) == _PACKAGE_ROOT
+def command_name(orig_argv: list[str]) -> str | None:
+    """The command's short name ("train" for ``python -m training.ppo.train``), or None.
+
+    None unless the interpreter was started with ``-m`` on a module of :data:`PACKAGES`.
+    """
+    args = list(orig_argv[1:])
+    if "-m" not in args:
+        return None
+    i = args.index("-m")
+    module = args[i + 1] if i + 1 < len(args) else ""
+    if module.split(".")[0] not in PACKAGES:
+        return None
+    return module.rsplit(".", 1)[-1]
 
 
 def _hook(kind, value, tb) -> None:
     if issubclass(kind, KeyboardInterrupt):
-        name = os.path.splitext(os.path.basename(sys.argv[0]))[0]
-        print(f"\n{name}: interrupted while starting; nothing was written", file=sys.stderr,
+        print(f"\n{_NAME}: interrupted while starting; nothing was written", file=sys.stderr,
               flush=True)  # fmt: skip
         return
     sys.__excepthook__(kind, value, tb)
 
 
-if sys.argv and sys.argv[0] and _is_our_command(sys.argv[0]):
+_NAME = command_name(getattr(sys, "orig_argv", []))
+if _NAME is not None:
     sys.excepthook = _hook

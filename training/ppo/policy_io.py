@@ -23,10 +23,6 @@ leaves a complete snapshot to resume from (:func:`find_snapshot`).
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import contextlib
 import hashlib
 import json

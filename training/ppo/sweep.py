@@ -21,10 +21,6 @@ results table is printed and written to ``results.csv`` in the sweep's directory
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import io
 import itertools
 import os

@@ -24,10 +24,6 @@ interrupted, imitation or PPO, to the run's own ``total_timesteps`` (give
 
 from __future__ import annotations
 
-# isort: off
-import training.plumbing.interrupts  # noqa: F401 (first: Ctrl-C in the imports below, one line)
-# isort: on
-
 import hashlib
 import os
 import time
