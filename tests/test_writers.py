@@ -308,6 +308,9 @@ def test_ctrl_c_hook_leaves_a_library_user_alone():
     assert command_name(["python", "-m", "pytest", "-m", "training.x"]) is None
     assert command_name(["python", "-c", "import training"]) is None
     assert command_name(["python", "-m"]) is None
+    assert command_name(["python", "-W", "error", "-mtraining.evaluate"]) == "evaluate"
+    assert command_name(["python", "-c", "pass", "-m", "training.ppo.train"]) is None  # argv of -c
+    assert command_name(["python", "script.py", "-m", "training.ppo.train"]) is None
     for code in ("import training; raise KeyboardInterrupt",
                  "import sys; sys.orig_argv = [sys.executable, '-m', 'pytest']; import training; "
                  "raise KeyboardInterrupt"):  # fmt: skip

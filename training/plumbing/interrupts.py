@@ -20,16 +20,22 @@ PACKAGES = ("training", "benchmarks")
 def command_name(orig_argv: list[str]) -> str | None:
     """The command's short name ("train" for ``python -m training.ppo.train``), or None.
 
-    None unless the interpreter was started with ``-m`` on a module of :data:`PACKAGES`.
+    None unless the interpreter was started with ``-m`` on a module of :data:`PACKAGES`. The
+    interpreter's options are read as Python reads them: the first of ``-c``, ``-m``, ``-`` or
+    a script ends them (``-X`` and ``-W`` take a value).
     """
-    args = list(orig_argv[1:])
-    if "-m" not in args:
-        return None
-    i = args.index("-m")
-    module = args[i + 1] if i + 1 < len(args) else ""
-    if module.split(".")[0] not in PACKAGES:
-        return None
-    return module.rsplit(".", 1)[-1]
+    args = iter(orig_argv[1:])
+    for arg in args:
+        if arg in ("-X", "-W"):
+            next(args, None)
+        elif arg.startswith("-m"):
+            module = arg[2:] or next(args, "")
+            if module.split(".")[0] not in PACKAGES:
+                return None
+            return module.rsplit(".", 1)[-1]
+        elif arg.startswith("-c") or arg == "-" or not arg.startswith("-"):
+            return None
+    return None
 
 
 def _hook(kind, value, tb) -> None:
