@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import io
 import json
 import os
 import sys
@@ -474,16 +475,28 @@ def save_normalizer(vecnorm, path: Path) -> None:
     """
     obs_rms = vecnorm.__dict__.get("obs_rms")  # getattr would search the wrapped env
     empty = np.zeros(0)
-    np.savez(
-        path,
-        obs_mean=obs_rms.mean if obs_rms is not None else empty,
-        obs_var=obs_rms.var if obs_rms is not None else empty,
-        obs_count=np.float64(obs_rms.count if obs_rms is not None else 0.0),
-        ret_mean=np.asarray(vecnorm.ret_rms.mean, np.float64),
-        ret_var=np.asarray(vecnorm.ret_rms.var, np.float64),
-        ret_count=np.float64(vecnorm.ret_rms.count),
-        **{k: np.float64(getattr(vecnorm, k)) for k in _NORM_SETTINGS},
-    )
+    d = {
+        "obs_mean": obs_rms.mean if obs_rms is not None else empty,
+        "obs_var": obs_rms.var if obs_rms is not None else empty,
+        "obs_count": obs_rms.count if obs_rms is not None else 0.0,
+        "ret_mean": vecnorm.ret_rms.mean,
+        "ret_var": vecnorm.ret_rms.var,
+        "ret_count": vecnorm.ret_rms.count,
+        **{k: getattr(vecnorm, k) for k in _NORM_SETTINGS},
+    }
+    Path(path).write_bytes(normalizer_bytes(d))
+
+
+def normalizer_bytes(d: dict[str, Any]) -> bytes:
+    """The normaliser file's bytes for the statistics and settings ``d``.
+
+    ``d`` has :func:`read_normalizer`'s keys; written as plain float64 arrays, the one format
+    that both :func:`save_normalizer` and a widened snapshot write.
+    """
+    keys = (*_NORM_ARRAYS, *_NORM_SETTINGS)
+    buf = io.BytesIO()
+    np.savez(buf, **{k: np.asarray(d[k], dtype=np.float64) for k in keys})
+    return buf.getvalue()
 
 
 def read_normalizer(

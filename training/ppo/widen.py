@@ -13,8 +13,6 @@ like any other. Nothing else changes shape, so the checks of any snapshot then a
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
 
 from biped_constraint_env.observation import OBS_LOW, OBSERVATION_BLOCKS
@@ -59,7 +57,12 @@ def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.n
     import torch
     from safetensors.torch import save
 
-    from training.ppo.policy_io import NORMALIZER_FILE, POLICY_FILE, read_normalizer
+    from training.ppo.policy_io import (
+        NORMALIZER_FILE,
+        POLICY_FILE,
+        normalizer_bytes,
+        read_normalizer,
+    )
 
     tensors = load_safetensors(snap.name(POLICY_FILE), snap.files[POLICY_FILE])
     if not all(k in tensors and tensors[k].dim() == 2 for k in FIRST_LAYERS):
@@ -73,7 +76,5 @@ def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.n
         if d["norm_obs"]:
             d["obs_mean"] = _insert(d["obs_mean"], added, mean, axis=0)
             d["obs_var"] = _insert(d["obs_var"], added, var, axis=0)
-        buf = io.BytesIO()
-        np.savez(buf, **{k: np.asarray(v, dtype=np.float64) for k, v in d.items()})
-        files[NORMALIZER_FILE] = buf.getvalue()
+        files[NORMALIZER_FILE] = normalizer_bytes(d)
     return Snapshot(snap.path, files)
