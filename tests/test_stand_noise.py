@@ -150,7 +150,7 @@ def test_a_run_feeds_the_command_in_m_s_saves_an_mlp_policy_and_refuses_a_normal
     assert json.loads((run_b / "init_from.json").read_text())["policy"] == str(run)
     # a run without the option would let those inputs drift from m/s: refused
     plain = [f for f in flags if f not in ("--stand-std-nm", "0.5")]
-    with pytest.raises(SystemExit, match="give --stand-std-nm to this run too"):
+    with pytest.raises(SystemExit, match="give one of them to this run too"):
         train_ppo.main([*plain, "--out-dir", str(tmp_path / "p"), "--init-from", str(run)])
 
 

@@ -12,7 +12,8 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
 
     ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
     With ``stand_std_nm`` the policy is :class:`training.ppo.exploration.StandNoisePolicy`
-    (the same weights as ``MlpPolicy``; a fixed noise on the rows commanded to stand).
+    (the same weights as ``MlpPolicy``; a fixed noise on the rows commanded to stand); with
+    ``stand_branch``, :class:`training.ppo.stand_branch.StandBranchPolicy`.
     """
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import LinearSchedule
@@ -28,6 +29,10 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         gear = cfg.action_map().gear  # N m per unit action, one per joint
         policy_kwargs["stand_log_std"] = np.log(cfg.stand_std_nm / gear).tolist()
         policy_kwargs["stand_speed"] = cfg.stand_speed_m_s
+    elif cfg.stand_branch:
+        from training.ppo.stand_branch import StandBranchPolicy
+
+        policy = StandBranchPolicy
     extra = {"normalize_advantage": False} if cfg.stand_balance else {}  # the callback does it
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
@@ -108,14 +113,14 @@ def training_env(
     The config's training env options (with its reference-state starts), its time limit and
     action map; ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy
     normalises its observations itself (fixed statistics), so VecNormalize normalises only the
-    returns. With ``stand_std_nm`` the command and the hip speed are not normalised
-    (:func:`training.ppo.exploration.pin_command`).
+    returns. With ``stand_std_nm`` or ``stand_branch`` the command and the hip speed are not
+    normalised (:func:`training.ppo.exploration.pin_command`).
     """
     from stable_baselines3.common.vec_env import VecNormalize
 
     venv = monitored_env(cfg, seed, monitor_file, env_threads)
     vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
-    if cfg.stand_std_nm > 0:
+    if cfg.pins_command:
         from training.ppo.exploration import pin_command
 
         pin_command(vecnorm)

@@ -65,6 +65,7 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
                 *p.mlp_extractor.policy_net.parameters(),
                 *p.action_net.parameters(),
                 p.log_std,
+                *(q for name, q in p.named_parameters() if name.startswith("branch_")),
             ]:
                 param.requires_grad_(not frozen)
 

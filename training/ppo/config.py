@@ -120,6 +120,11 @@ class PPOConfig:
     stand_balance: bool = False  # with stand_std_nm: those rows' advantages scaled by their
     # std over the learned std (geometric mean over joints), so that a row's pull on the
     # network's mean does not grow as its noise shrinks (training.ppo.exploration)
+    stand_branch: bool = False  # (task "command") the actor gets a standing branch: its own
+    # MLP, head and learned std, acting where the command is 0 in model 4 (both feet down);
+    # the command and hip speed then read in m/s (training.ppo.stand_branch)
+    stand_branch_from: str = ""  # with stand_branch and init_from: a policy directory whose
+    # actor (and learned std) starts the branch instead of a random one
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)
@@ -189,30 +194,45 @@ class PPOConfig:
         self._check_restart()
         self._check_stand_noise()
 
+    @property
+    def pins_command(self) -> bool:
+        """Whether the network reads the command and the hip speed in m/s (not normalised)."""
+        return self.stand_std_nm > 0 or self.stand_branch
+
     def _check_stand_noise(self) -> None:
-        """Refuse ``stand_std_nm`` without a command as the observation's last entry."""
+        """Refuse ``stand_std_nm`` or ``stand_branch`` where they mean nothing."""
+        if self.stand_branch_from and not (self.stand_branch and self.init_from):
+            raise ValueError("--stand-branch-from goes with --stand-branch and --init-from")
+        if self.stand_branch_from and self.init_normalizer != "snapshot":
+            raise ValueError("--stand-branch-from maps the start's normalised input: it needs "
+                             "--init-normalizer snapshot")  # fmt: skip
         if self.stand_std_nm <= 0:
             if self.stand_speed_m_s > 0 or self.stand_balance:
                 raise ValueError("--stand-speed-m-s and --stand-balance go with --stand-std-nm")
-            return
-        if self.stand_std_nm < 1e-3:
+        elif self.stand_std_nm < 1e-3:
             raise ValueError(f"--stand-std-nm must be 0 (off) or at least 1e-3 N m, got "
                              f"{self.stand_std_nm!r}")  # fmt: skip
+        elif self.stand_branch:
+            raise ValueError("--stand-std-nm and --stand-branch are two ways to explore at a "
+                             "zero command: give one")  # fmt: skip
+        if not self.pins_command:
+            return
+        flag = "--stand-std-nm" if self.stand_std_nm > 0 else "--stand-branch"
         from biped_constraint_env.settings import make_settings
 
         for s in (self.settings(), make_settings(**self.train_env_kwargs())):
             blocks = s.observation.blocks
             if not blocks or blocks[-1] != "command":
-                raise ValueError("--stand-std-nm needs the command as the observation's last "
-                                 "entry ([env] task = \"command\")")  # fmt: skip
-            if s.action.unit_actions:
+                raise ValueError(f"{flag} needs the command as the observation's last "
+                                 f"entry ([env] task = \"command\")")  # fmt: skip
+            if s.action.unit_actions and self.stand_std_nm > 0:
                 raise ValueError("--stand-std-nm is a torque noise: it needs [env] action = "
                                  "\"torque\"")  # fmt: skip
-        for name, on in (("use_sde", self.use_sde), ("teacher", self.teacher),
-                         ("target_kl (the standing rows' small noise would dominate the KL)",
-                          self.target_kl > 0)):  # fmt: skip
+        small = ("target_kl (the standing rows' small noise would dominate the KL)",
+                 self.target_kl > 0 and self.stand_std_nm > 0)  # fmt: skip
+        for name, on in (("use_sde", self.use_sde), ("teacher", self.teacher), small):
             if on:
-                raise ValueError(f"--stand-std-nm does not combine with {name}")
+                raise ValueError(f"{flag} does not combine with {name}")
 
     RESTART_KEYS = ("every", "window", "min_steps", "max")
 

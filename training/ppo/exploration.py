@@ -70,7 +70,42 @@ def pin_command(vecnorm) -> None:
     vecnorm.obs_rms = stats
 
 
-class StandNoisePolicy(ActorCriticPolicy):
+class RowPolicy(ActorCriticPolicy):
+    """``ActorCriticPolicy`` whose distribution depends on the observation row by row.
+
+    SB3 builds the distribution from the actor's latent alone; every public route (rollout,
+    update, prediction) here first hands the observation to :meth:`_see` and clears it after,
+    so that ``_get_action_dist_from_latent`` can read what the subclass kept of it.
+    """
+
+    def _see(self, obs) -> None:
+        """Keep what the distribution needs of ``obs`` (None: clear it)."""
+        raise NotImplementedError
+
+    def _with_obs(self, obs, fn):
+        self._see(obs)
+        try:
+            return fn()
+        finally:
+            self._see(None)
+
+    def forward(self, obs, deterministic: bool = False):
+        """SB3's rollout pass (actions, values, log-probabilities), row by row."""
+        parent = super()
+        return self._with_obs(obs, lambda: parent.forward(obs, deterministic))
+
+    def evaluate_actions(self, obs, actions):
+        """SB3's update pass (values, log-probabilities, entropy), row by row."""
+        parent = super()
+        return self._with_obs(obs, lambda: parent.evaluate_actions(obs, actions))
+
+    def get_distribution(self, obs):
+        """The action distribution of ``obs``, row by row (``predict`` comes here)."""
+        parent = super()
+        return self._with_obs(obs, lambda: parent.get_distribution(obs))
+
+
+class StandNoisePolicy(RowPolicy):
     """``ActorCriticPolicy`` with a fixed exploration noise on rows commanded to stand.
 
     ``stand_log_std``: the log-std (action units, one per action) where the command (the last
@@ -100,27 +135,8 @@ class StandNoisePolicy(ActorCriticPolicy):
             rows &= obs[..., HIP_VY].abs() < self.stand_speed
         return rows
 
-    def _with_stand(self, obs, fn):
-        self._stand = self.stand_rows(obs)
-        try:
-            return fn()
-        finally:
-            self._stand = None
-
-    def forward(self, obs, deterministic: bool = False):
-        """SB3's rollout pass (actions, values, log-probabilities), with the rows' noise."""
-        parent = super()
-        return self._with_stand(obs, lambda: parent.forward(obs, deterministic))
-
-    def evaluate_actions(self, obs, actions):
-        """SB3's update pass (values, log-probabilities, entropy), with the rows' noise."""
-        parent = super()
-        return self._with_stand(obs, lambda: parent.evaluate_actions(obs, actions))
-
-    def get_distribution(self, obs):
-        """The action distribution of ``obs``, with the rows' noise."""
-        parent = super()
-        return self._with_stand(obs, lambda: parent.get_distribution(obs))
+    def _see(self, obs) -> None:
+        self._stand = None if obs is None else self.stand_rows(obs)
 
     def _get_action_dist_from_latent(self, latent_pi):
         if self._stand is None:  # every public route sets the rows first

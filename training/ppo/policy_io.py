@@ -576,6 +576,8 @@ class ObsNormalizer:
 def build_policy(cfg, observation_space=None):
     """A fresh SB3 ``ActorCriticPolicy`` (``MlpPolicy``) of the architecture in ``cfg``.
 
+    With ``cfg.stand_branch``, :class:`training.ppo.stand_branch.StandBranchPolicy`.
+
     ``cfg``: a :class:`training.ppo.config.PPOConfig`. The action space is [-1, 1]^5 (the
     policy's actions, mapped to torques by ``cfg.action_map()``).
     """
@@ -588,7 +590,10 @@ def build_policy(cfg, observation_space=None):
         s = cfg.settings()
         observation_space = env_obs_space(s.observation.blocks)
     act_space = spaces.Box(-1.0, 1.0, (5,), np.float32)
-    return ActorCriticPolicy(
+    cls = ActorCriticPolicy
+    if cfg.stand_branch:
+        from training.ppo.stand_branch import StandBranchPolicy as cls
+    return cls(
         observation_space, act_space, lambda _: 0.0, use_sde=cfg.use_sde, **cfg.policy_kwargs()
     )
 

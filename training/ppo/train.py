@@ -66,6 +66,7 @@ from training.ppo.policy_io import (
     STATE_FILE,
     UntrustedFileError,
     available,
+    build_policy,
     check_weights,
     is_complete,
     json_text,
@@ -208,21 +209,25 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
         print(f"the start's network widened with zero columns for observation entries "
               f"{added}", flush=True)  # fmt: skip
     check_weights(cfg, snap)
+    if _has_branch(src) and not cfg.stand_branch:
+        raise Refusal(f"train_ppo: error: --init-from: {src}'s network has a standing branch; "
+                      f"give --stand-branch to this run too")  # fmt: skip
     model = make_model(cfg, vecnorm, fs)
-    load_weights(model.policy, snap)
-    if cfg.stand_std_nm > 0:
+    _load_start(cfg, src, snap, model.policy)
+    if cfg.pins_command:
         _command_in_m_s(src, snap, cfg, model.policy)
     elif _stand_trained(src):
-        raise Refusal(f"train_ppo: error: --init-from: {src} was trained with --stand-std-nm: "
-                      f"its network reads the command and the hip speed in m/s; give "
-                      f"--stand-std-nm to this run too")  # fmt: skip
+        raise Refusal(f"train_ppo: error: --init-from: {src} was trained with --stand-std-nm "
+                      f"or --stand-branch: its network reads the command and the hip speed in "
+                      f"m/s; give one of them to this run too")  # fmt: skip
     if cfg.init_normalizer == "snapshot":
         restore_normalizer(vecnorm, snap)
     digest = hashlib.sha256(original.files[POLICY_FILE]).hexdigest()
-    run.write("init_from.json", json_text({"policy": str(src), "snapshot": which,
-                                           "policy_sha256": digest,
-                                           "normalizer": cfg.init_normalizer,
-                                           "added_inputs": added}))  # fmt: skip
+    record = {"policy": str(src), "snapshot": which, "policy_sha256": digest,
+              "normalizer": cfg.init_normalizer, "added_inputs": added}  # fmt: skip
+    if cfg.stand_branch_from:
+        record["stand_branch_from"] = _branch_start(cfg, vecnorm, model.policy)
+    run.write("init_from.json", json_text(record))
     print(f"starting PPO from {src} ({which}/, weights sha256 {digest[:12]}, "
           f"{cfg.init_normalizer} normaliser)", flush=True)  # fmt: skip
     return model
@@ -271,15 +276,61 @@ def _added_statistics(cfg: PPOConfig, added: list[int], resets: int = 16):
 
 
 def _stand_trained(src: Path) -> bool:
-    """Whether the policy directory's config (where it has one) trained with ``stand_std_nm``."""
+    """Whether the policy directory's config (where it has one) reads the command in m/s."""
     try:
-        return read_config(src).stand_std_nm > 0
+        return read_config(src).pins_command
     except FileNotFoundError:
         return False
 
 
+def _load_start(cfg: PPOConfig, src: Path, snap, policy) -> None:
+    """Load the start's weights into ``policy``; a plain actor into a standing-branch run's.
+
+    A ``stand_branch`` run from a start without one takes the start's walker (every weight an
+    ``MlpPolicy`` has) and keeps its branch as built (random, or then from
+    ``stand_branch_from``).
+    """
+    if not cfg.stand_branch or _has_branch(src):
+        load_weights(policy, snap)
+        return
+    from dataclasses import replace
+
+    from training.ppo.stand_branch import walker_weights
+
+    plain = build_policy(replace(cfg, stand_branch=False, stand_branch_from=""))
+    load_weights(plain, snap)
+    missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
+    assert not unexpected and all(k.startswith("branch_") for k in missing), (missing, unexpected)
+    assert set(walker_weights(policy)) == set(plain.state_dict())
+
+
+def _has_branch(src: Path) -> bool:
+    try:
+        return read_config(src).stand_branch
+    except FileNotFoundError:
+        return False
+
+
+def _branch_start(cfg: PPOConfig, vecnorm, policy) -> dict:
+    """Start the branch from ``cfg.stand_branch_from``'s actor; (where, its weights' SHA-256)."""
+    from training.ppo.stand_branch import branch_from, load_source
+
+    src = Path(cfg.stand_branch_from)
+    if not src.is_dir():
+        raise Refusal(f"train_ppo: error: --stand-branch-from: {src}: no such policy directory")
+    try:
+        source, norm, which, digest = load_source(src)
+        stats = vecnorm.obs_rms
+        branch_from(policy, source, norm, stats.mean, stats.var, vecnorm.epsilon)
+    except ValueError as e:
+        raise Refusal(f"train_ppo: error: --stand-branch-from: {e}") from None
+    print(f"the standing branch starts from {src} ({which}/, weights sha256 {digest[:12]})",
+          flush=True)  # fmt: skip
+    return {"policy": str(src), "snapshot": which, "policy_sha256": digest}
+
+
 def _command_in_m_s(src: Path, snap, cfg: PPOConfig, policy) -> None:
-    """A ``stand_std_nm`` run's start, made to read the command and hip speed in m/s (in place).
+    """A start made to read the command and hip speed in m/s (in place; ``cfg.pins_command``).
 
     Such a run feeds the network those entries unnormalised (mean 0, variance 1 in its
     normaliser); a start whose normaliser held other statistics for them has them folded into
@@ -299,7 +350,7 @@ def _command_in_m_s(src: Path, snap, cfg: PPOConfig, policy) -> None:
         folded = fold_pinned_inputs(policy, d["obs_mean"], d["obs_var"], d["epsilon"],
                                     d["clip_obs"], exact=exact)  # fmt: skip
     except ValueError as e:
-        raise Refusal(f"train_ppo: error: --stand-std-nm feeds the network the command and the "
+        raise Refusal(f"train_ppo: error: this run feeds the network the command and the "
                       f"hip speed in m/s; {src}: {e}: start from a random network or another "
                       f"run") from None  # fmt: skip
     if folded:

@@ -1,0 +1,174 @@
+"""The training option ``stand_branch``: a second actor head at a zero command in model 4."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.policies import ActorCriticPolicy
+
+from training.ppo.config import PPOConfig
+from training.ppo.stand_branch import MODE_ENTRY, StandBranchPolicy, branch_from
+
+COMMAND = {"env": {"task": "command", "action": "torque"}}
+OBS = spaces.Box(-np.inf, np.inf, (27,), np.float32)
+ACT = spaces.Box(-1.0, 1.0, (5,), np.float32)
+
+
+def _policy(seed=0, branch_log_std=-5.0):
+    torch.manual_seed(seed)
+    return StandBranchPolicy(OBS, ACT, lambda _: 1e-3, net_arch=[16, 16], log_std_init=-3.0,
+                             branch_log_std_init=branch_log_std)  # fmt: skip
+
+
+def _obs(n, command, mode4):
+    obs = torch.randn(n, 27)
+    obs[:, -1] = torch.as_tensor(command, dtype=torch.float32)
+    obs[:, MODE_ENTRY] = torch.where(torch.as_tensor(mode4), 3.0, -0.2)
+    return obs
+
+
+def test_the_branch_acts_only_at_a_zero_command_in_model_4():
+    policy = _policy()
+    obs = _obs(6, [0.0, 0.0, 0.3, 1e-6, 0.0, 2.0], [True, False, True, True, True, False])
+    dist = policy.get_distribution(obs).distribution
+    gate = np.array([True, False, False, False, True, False])
+    assert policy.gate(obs).numpy().tolist() == gate.tolist()
+    walker = policy.action_net(policy.mlp_extractor.forward_actor(obs))
+    branch = policy.branch_mean(obs)
+    assert not torch.allclose(walker, branch)  # two heads: the test could fail
+    assert torch.equal(dist.mean[gate], branch[gate])
+    assert torch.equal(dist.mean[~gate], walker[~gate])
+    std = dist.stddev.detach().numpy()
+    assert std[gate] == pytest.approx(np.full((2, 5), np.exp(-5.0)), rel=1e-5)
+    assert std[~gate] == pytest.approx(np.full((4, 5), np.exp(-3.0)), rel=1e-5)
+    # predict (the run-time route) goes through the gate too
+    det, _ = policy.predict(obs.numpy(), deterministic=True)
+    np.testing.assert_allclose(det, np.clip(dist.mean.detach().numpy(), -1, 1), atol=1e-6)
+
+
+def test_rollout_and_update_agree_and_each_head_learns_only_from_its_rows():
+    policy = _policy()
+    obs = _obs(64, np.where(np.arange(64) % 3 == 0, 0.0, 1.0), np.arange(64) % 2 == 0)
+    with torch.no_grad():
+        actions, _, logp = policy(obs)
+        _, logp2, _ = policy.evaluate_actions(obs, actions)
+    assert torch.allclose(logp, logp2, atol=1e-5)
+    gate = policy.gate(obs)
+    assert 0 < gate.sum() < 64
+    for rows, learns, still in ((gate, "branch_", "action_net"), (~gate, "action_net", "branch_")):
+        policy.zero_grad(set_to_none=True)
+        _, lp, _ = policy.evaluate_actions(obs[rows], actions[rows])
+        lp.sum().backward()
+        grads = {k: p.grad for k, p in policy.named_parameters()}
+        assert any(g is not None and g.abs().sum() > 0 for k, g in grads.items()
+                   if k.startswith(learns))  # fmt: skip
+        assert all(g is None or g.abs().sum() == 0 for k, g in grads.items()
+                   if k.startswith(still))  # fmt: skip
+    # the walker's actor layers get nothing from the branch's rows either
+    policy.zero_grad(set_to_none=True)
+    _, lp, _ = policy.evaluate_actions(obs[gate], actions[gate])
+    lp.sum().backward()
+    g = policy.mlp_extractor.policy_net[0].weight.grad
+    assert g is None or g.abs().sum() == 0
+
+
+def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_input():
+    torch.manual_seed(1)
+    source = ActorCriticPolicy(OBS, ACT, lambda _: 1e-3, net_arch=[16, 16], log_std_init=-4.0)
+    rng = np.random.default_rng(0)
+    src_mean, src_var = rng.normal(0, 1, 27), rng.uniform(0.01, 2.0, 27)
+    src_var[[0, 16]] = 0.0  # entries that never varied in the source's data
+    run_mean, run_var = rng.normal(0, 1, 27), rng.uniform(0.1, 3.0, 27)
+    norm = {"obs_mean": src_mean, "obs_var": src_var, "epsilon": 1e-8, "clip_obs": 10.0}
+    policy = _policy()
+    branch_from(policy, source, norm, run_mean, run_var, 1e-8)
+    raw = rng.normal(run_mean, np.sqrt(run_var) * 3, (200, 27))
+    raw[:, [0, 16]] = src_mean[[0, 16]]  # as in the source's data
+    x_run = np.clip((raw - run_mean) / np.sqrt(run_var + 1e-8), -10, 10)
+    inside = np.all(np.abs((raw - run_mean) / np.sqrt(run_var + 1e-8)) < 10, axis=1)
+    x_src = np.clip((raw - src_mean) / np.sqrt(src_var + 1e-8), -10, 10)
+    with torch.no_grad():
+        mine = policy.branch_mean(torch.as_tensor(x_run, dtype=torch.float32)).numpy()
+        theirs = source.action_net(source.mlp_extractor.forward_actor(
+            torch.as_tensor(x_src, dtype=torch.float32))).numpy()  # fmt: skip
+    assert (x_src == 10).any() and inside.sum() > 100  # the source's clip is exercised
+    np.testing.assert_allclose(mine[inside], theirs[inside], atol=1e-5)
+    assert torch.equal(policy.branch_log_std.detach(), source.log_std.detach())
+    # an entry the source never saw vary reads 0 whatever its value now
+    moved = x_run.copy()
+    moved[:, 16] = 5.0
+    with torch.no_grad():
+        a, b = (policy.branch_mean(torch.as_tensor(x, dtype=torch.float32)) for x in (x_run, moved))
+    assert torch.equal(a, b)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"stand_branch": True, "env": {"task": "walk"}}, "command as the observation's last"),
+        ({"stand_branch": True, "stand_std_nm": 0.5, **COMMAND}, "give one"),
+        ({"stand_branch": True, "use_sde": True, **COMMAND}, "use_sde"),
+        ({"stand_branch_from": "x", **COMMAND}, "goes with --stand-branch and --init-from"),
+        ({"stand_branch": True, "stand_branch_from": "x", **COMMAND}, "--init-from"),
+        ({"stand_branch": True, "stand_branch_from": "x", "init_from": "y",
+          "init_normalizer": "fresh", **COMMAND}, "snapshot"),
+    ],
+)  # fmt: skip
+def test_the_option_is_refused_where_it_means_nothing(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        PPOConfig(**kwargs).validate()
+    PPOConfig(stand_branch=True, target_kl=0.02, **COMMAND).validate()
+
+
+def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_path):
+    """A walker (init_from) and a stander (stand_branch_from) start one network, loaded as any."""
+    from training.ppo import train as train_ppo
+    from training.ppo.policy_io import load_policy
+
+    flags = ["--total-timesteps", "128", "--n-envs", "2", "--n-steps", "32", "--batch-size",
+             "64", "--n-epochs", "1", "--eval-freq", "1000", "--checkpoint-freq", "64",
+             "--progress", "false", "--env", "task=command"]  # fmt: skip
+    for name in ("walker", "stander"):  # plain actors that read the command in m/s
+        rc = train_ppo.main([*flags, "--stand-std-nm", "0.5", "--out-dir", str(tmp_path / name)])
+        assert rc == 0
+    walker, stander = ((tmp_path / n / "train_ppo").iterdir().__next__() for n in
+                       ("walker", "stander"))  # fmt: skip
+    tiny = ["--learning-rate", "1e-12"]
+    rc = train_ppo.main([*flags, *tiny, "--out-dir", str(tmp_path / "b"), "--init-from",
+                         str(walker), "--stand-branch", "--stand-branch-from",
+                         str(stander)])  # fmt: skip
+    assert rc == 0
+    (run,) = (tmp_path / "b" / "train_ppo").iterdir()
+    record = json.loads((run / "init_from.json").read_text())
+    assert record["stand_branch_from"]["policy"] == str(stander)
+    assert len(record["stand_branch_from"]["policy_sha256"]) == 64
+    policy, norm, cfg, _ = load_policy(run, "final")
+    assert isinstance(policy, StandBranchPolicy) and cfg.stand_branch
+    assert norm.mean[-1] == 0.0 and norm.var[-1] == 1.0  # the gate reads the command in m/s
+    # rows at a zero command in model 4 act as the stander, the others as the walker
+    # the branch is the stander's actor behind the map from the walker's normalised input to
+    # the stander's (the statistics at the start; both runs already read the command in m/s)
+    s_pol, s_norm, _, _ = load_policy(stander)
+    w_pol, w_norm, _, _ = load_policy(walker)
+    for mine, theirs in ((policy.branch_net, s_pol.mlp_extractor.policy_net),
+                         (policy.branch_action, s_pol.action_net),
+                         (policy.mlp_extractor, w_pol.mlp_extractor),
+                         (policy.action_net, w_pol.action_net)):  # fmt: skip
+        for a, b in zip(mine.state_dict().values(), theirs.state_dict().values(), strict=True):
+            np.testing.assert_allclose(a.numpy(), b.numpy(), atol=1e-6)
+    read = s_norm.var >= 1e-6  # what the stander's actor read (the rest: 0, as it did there)
+    scale = np.where(read, np.sqrt(w_norm.var + 1e-8) / np.sqrt(s_norm.var + 1e-8), 0.0)
+    shift = np.where(read, (w_norm.mean - s_norm.mean) / np.sqrt(s_norm.var + 1e-8), 0.0)
+    np.testing.assert_allclose(policy.branch_input.scale.numpy(), scale, rtol=1e-6)
+    np.testing.assert_allclose(policy.branch_input.shift.numpy(), shift, rtol=1e-6, atol=1e-6)
+    assert 0 < read.sum() < 27
+    # a later stage from it keeps its branch and needs the option
+    rc = train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(run),
+                         "--stand-branch"])  # fmt: skip
+    assert rc == 0
+    with pytest.raises(SystemExit, match="has a standing branch; give --stand-branch"):
+        train_ppo.main([*flags, "--out-dir", str(tmp_path / "d"), "--init-from", str(run)])
+    assert Path(run / "config.toml").read_text().count("stand_branch = true") == 1
