@@ -95,6 +95,10 @@ def test_pinned_statistics_hold_the_command_entry_at_the_identity():
         stats.update(rng.normal(3.0, 2.0, (50, 4)))
         assert stats.mean[-1] == 0.0 and stats.var[-1] == 1.0
         assert np.all(np.abs(stats.mean[:3] - 3.0) < 1.0) and np.all(stats.var[:3] > 1.0)
+    frozen = PinnedStats((4,), [-1], frozen=True)
+    frozen.mean, frozen.var = np.ones(4), np.full(4, 2.0)
+    frozen.update(rng.normal(3.0, 2.0, (50, 4)))
+    assert frozen.mean.tolist() == [1, 1, 1, 0] and frozen.var.tolist() == [2, 2, 2, 1]
     saved = np.array([1.0, 2.0, 3.0, 4.0])
     stats.mean, stats.var = saved, saved  # a restored snapshot
     assert stats.mean.tolist() == [1.0, 2.0, 3.0, 0.0] and stats.var.tolist() == [1, 2, 3, 1]

@@ -114,7 +114,8 @@ def training_env(
     action map; ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy
     normalises its observations itself (fixed statistics), so VecNormalize normalises only the
     returns. With ``stand_std_nm`` or ``stand_branch`` the command and the hip speed are not
-    normalised (:func:`training.ppo.exploration.pin_command`).
+    normalised (:func:`training.ppo.exploration.pin_command`); with ``stand_branch_from`` the
+    observation statistics stay the start's (the branch's input map is exact for them).
     """
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -123,7 +124,7 @@ def training_env(
     if cfg.pins_command:
         from training.ppo.exploration import pin_command
 
-        pin_command(vecnorm)
+        pin_command(vecnorm, frozen=bool(cfg.stand_branch_from))
     return venv, vecnorm
 
 

@@ -124,7 +124,8 @@ class PPOConfig:
     # MLP, head and learned std, acting where the command is 0 in model 4 (both feet down);
     # the command and hip speed then read in m/s (training.ppo.stand_branch)
     stand_branch_from: str = ""  # with stand_branch and init_from: a policy directory whose
-    # actor (and learned std) starts the branch instead of a random one
+    # actor (and learned std) starts the branch instead of a random one; the run's observation
+    # statistics then stay the start's (the returns' still move)
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)

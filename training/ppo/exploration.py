@@ -49,10 +49,18 @@ class PinnedStats(RunningMeanStd):
     Every assignment to ``mean`` or ``var`` (SB3's update, a restored snapshot) is pinned.
     """
 
-    def __init__(self, shape: tuple[int, ...], indices):
-        """``indices``: the entries held (negative count from the end)."""
-        self._index = list(indices)
+    def __init__(self, shape: tuple[int, ...], indices, frozen: bool = False):
+        """Hold ``indices`` (negative: from the end); ``frozen``: hold every entry.
+
+        A frozen one moves with no data; a restored snapshot still sets it.
+        """
+        self._index, self.frozen = list(indices), frozen
         super().__init__(shape=shape)
+
+    def update(self, arr) -> None:
+        """SB3's running update, or nothing where the statistics are frozen."""
+        if not self.frozen:
+            super().update(arr)
 
     mean = property(lambda self: self._mean,
                     lambda self, v: setattr(self, "_mean", _pinned(v, self._index, 0.0)),
@@ -62,10 +70,13 @@ class PinnedStats(RunningMeanStd):
                    doc="The running variance (the pinned entries 1).")  # fmt: skip
 
 
-def pin_command(vecnorm) -> None:
-    """Hold the :data:`PINNED` entries of ``vecnorm``'s observation statistics at the identity."""
+def pin_command(vecnorm, frozen: bool = False) -> None:
+    """Hold the :data:`PINNED` entries of ``vecnorm``'s observation statistics at the identity.
+
+    ``frozen``: hold the others where they are set too (the returns' statistics still move).
+    """
     old = vecnorm.obs_rms
-    stats = PinnedStats(old.mean.shape, list(PINNED))
+    stats = PinnedStats(old.mean.shape, list(PINNED), frozen)
     stats.mean, stats.var, stats.count = old.mean, old.var, old.count
     vecnorm.obs_rms = stats
 

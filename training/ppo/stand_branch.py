@@ -16,9 +16,8 @@ lifts hands the row back to the walker.
 The branch reads the run's normalised observation through a fixed affine map and clip
 (:class:`InputMap`, buffers saved with the weights), so that a branch started from another
 run's actor (``stand_branch_from``) computes that run's own normalised input: exactly, for the
-run's observation statistics at the start (they drift little over a stage: the counts are
-tens of millions); entries that never varied in the other run's statistics read 0, as they
-did there.
+run's observation statistics, which such a run holds fixed (``pin_command(frozen=True)``);
+entries that barely varied in the other run's statistics read 0, as they did there.
 """
 
 from __future__ import annotations
@@ -37,9 +36,11 @@ STAND_MODEL = N_MODELS
 """The contact state the branch acts in: model 4, both feet down."""
 MODE_ENTRY = OBS_MODE.start + STAND_MODEL - 1
 """The observation's entry of model 4's one-hot."""
-CONSTANT_VAR = 1e-6
-"""An entry whose variance in the branch's source statistics is below this never varied there:
-the branch reads 0 for it."""
+MIN_STD_RATIO = 0.01
+"""An entry whose standard deviation in the source's statistics is below this fraction of the
+run's barely varied there: the source's normalisation would blow the run's variation (and its
+sensor noise) up a hundredfold and more, so the branch reads 0 for it, the value the source
+saw it at (the stander's foot rate: 0.002 rad/s there, 0.42 in a walk, 0.05 of sensor noise)."""
 
 
 class InputMap(nn.Module):
@@ -128,13 +129,13 @@ def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: 
     normaliser (:func:`training.ppo.policy_io.read_normalizer`); ``run_mean``, ``run_var``,
     ``run_eps``: the statistics this run normalises with now (pinned entries 0, 1). The
     branch's input map turns this run's normalised input into the source's: raw = x std + mean,
-    then the source's ``clip((raw - mean) / sqrt(var + eps))``; entries the source never saw
-    vary read 0.
+    then the source's ``clip((raw - mean) / sqrt(var + eps))``; entries that barely varied in
+    the source's data (:data:`MIN_STD_RATIO`) read 0.
     """
     src_mean, src_var = source_norm["obs_mean"], source_norm["obs_var"]
     run_std = np.sqrt(run_var + run_eps)
     src_std = np.sqrt(src_var + source_norm["epsilon"])
-    varied = src_var >= CONSTANT_VAR
+    varied = src_std >= MIN_STD_RATIO * run_std
     scale = np.where(varied, run_std / src_std, 0.0)
     shift = np.where(varied, (run_mean - src_mean) / src_std, 0.0)
     actor = source.mlp_extractor.policy_net
