@@ -49,6 +49,24 @@ def test_the_branch_acts_only_at_a_zero_command_in_model_4():
     np.testing.assert_allclose(det, np.clip(dist.mean.detach().numpy(), -1, 1), atol=1e-6)
 
 
+def test_the_branch_critic_values_the_gated_rows_in_every_pass():
+    policy = _policy()
+    with torch.no_grad():
+        policy.branch_value_scale.fill_(2.5)
+    obs = _obs(6, [0.0, 0.0, 0.3, 0.0, 1.0, 0.0], [True, False, True, True, True, False])
+    gate = policy.gate(obs)
+    with torch.no_grad():
+        walker = policy.value_net(policy.mlp_extractor.forward_critic(obs))
+        branch = policy.branch_value(policy.branch_value_net(obs)) * 2.5  # the input map: 1, 0
+        want = torch.where(gate[:, None], branch, walker)
+        assert not torch.allclose(walker[gate], want[gate])
+        _, v_rollout, _ = policy(obs)
+        v_update, _, _ = policy.evaluate_actions(obs, torch.zeros(6, 5))
+        v_boot = policy.predict_values(obs)
+    for v in (v_rollout, v_update, v_boot):
+        torch.testing.assert_close(v, want)
+
+
 def test_rollout_and_update_agree_and_each_head_learns_only_from_its_rows():
     policy = _policy()
     obs = _obs(64, np.where(np.arange(64) % 3 == 0, 0.0, 1.0), np.arange(64) % 2 == 0)
@@ -58,10 +76,11 @@ def test_rollout_and_update_agree_and_each_head_learns_only_from_its_rows():
     assert torch.allclose(logp, logp2, atol=1e-5)
     gate = policy.gate(obs)
     assert 0 < gate.sum() < 64
-    for rows, learns, still in ((gate, "branch_", "action_net"), (~gate, "action_net", "branch_")):
+    actor = ("branch_net", "branch_action", "branch_log_std")
+    for rows, learns, still in ((gate, actor, ("action_net",)), (~gate, ("action_net",), actor)):
         policy.zero_grad(set_to_none=True)
         _, lp, _ = policy.evaluate_actions(obs[rows], actions[rows])
-        lp.sum().backward()
+        lp.sum().backward()  # the log-probability: the actors' gradient alone
         grads = {k: p.grad for k, p in policy.named_parameters()}
         assert any(g is not None and g.abs().sum() > 0 for k, g in grads.items()
                    if k.startswith(learns))  # fmt: skip
@@ -82,9 +101,10 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
     src_mean, src_var = rng.normal(0, 1, 27), rng.uniform(0.01, 2.0, 27)
     src_var[[0, 16]] = 0.0  # entries that never varied in the source's data
     run_mean, run_var = rng.normal(0, 1, 27), rng.uniform(0.1, 3.0, 27)
-    norm = {"obs_mean": src_mean, "obs_var": src_var, "epsilon": 1e-8, "clip_obs": 10.0}
+    norm = {"obs_mean": src_mean, "obs_var": src_var, "epsilon": 1e-8, "clip_obs": 10.0,
+            "ret_var": 4.0}  # fmt: skip
     policy = _policy()
-    branch_from(policy, source, norm, run_mean, run_var, 1e-8)
+    branch_from(policy, source, norm, run_mean, run_var, 1e-8, 9.0)
     raw = rng.normal(run_mean, np.sqrt(run_var) * 3, (200, 27))
     raw[:, [0, 16]] = src_mean[[0, 16]]  # as in the source's data
     x_run = np.clip((raw - run_mean) / np.sqrt(run_var + 1e-8), -10, 10)
@@ -97,6 +117,11 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
     assert (x_src == 10).any() and inside.sum() > 100  # the source's clip is exercised
     np.testing.assert_allclose(mine[inside], theirs[inside], atol=1e-5)
     assert torch.equal(policy.branch_log_std.detach(), source.log_std.detach())
+    with torch.no_grad():  # its critic too, in this run's return units
+        mine_v = policy.branch_values(torch.as_tensor(x_run, dtype=torch.float32)).numpy()
+        theirs_v = source.value_net(source.mlp_extractor.forward_critic(
+            torch.as_tensor(x_src, dtype=torch.float32))).numpy()  # fmt: skip
+    np.testing.assert_allclose(mine_v[inside], theirs_v[inside] * np.sqrt(4.0 / 9.0), atol=1e-5)
     # an entry the source never saw vary reads 0 whatever its value now
     moved = x_run.copy()
     moved[:, 16] = 5.0
@@ -155,6 +180,8 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     w_pol, w_norm, _, _ = load_policy(walker)
     for mine, theirs in ((policy.branch_net, s_pol.mlp_extractor.policy_net),
                          (policy.branch_action, s_pol.action_net),
+                         (policy.branch_value_net, s_pol.mlp_extractor.value_net),
+                         (policy.branch_value, s_pol.value_net),
                          (policy.mlp_extractor, w_pol.mlp_extractor),
                          (policy.action_net, w_pol.action_net)):  # fmt: skip
         for a, b in zip(mine.state_dict().values(), theirs.state_dict().values(), strict=True):

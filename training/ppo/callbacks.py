@@ -36,10 +36,14 @@ PPO_CKPT = "checkpoints/latest"
 def critic_warmup(cfg: PPOConfig, anchor=None):
     """A callback: the actor frozen for the first ``cfg.critic_warmup`` rollouts.
 
+    The actor: the walker's, and a standing branch's
+    (:data:`training.ppo.stand_branch.BRANCH_ACTOR`).
     With ``anchor`` (an :class:`training.ppo.imitation.Anchor`) it also takes
     ``cfg.bc_anchor_steps`` behaviour-cloning steps after every PPO update.
     """
     from stable_baselines3.common.callbacks import BaseCallback
+
+    from training.ppo.stand_branch import BRANCH_ACTOR
 
     class CriticWarmup(BaseCallback):
         def __init__(self):
@@ -65,7 +69,7 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
                 *p.mlp_extractor.policy_net.parameters(),
                 *p.action_net.parameters(),
                 p.log_std,
-                *(q for name, q in p.named_parameters() if name.startswith("branch_")),
+                *(q for name, q in p.named_parameters() if name.startswith(BRANCH_ACTOR)),
             ]:
                 param.requires_grad_(not frozen)
 

@@ -4,12 +4,14 @@ Every PPO run from the walker told to stop walked on (``results/command_stage4``
 walker's actor at a zero command is a walk, and exploring about it never samples a stop,
 while a network trained only to stand (PPO from a random network, standing starts at a zero
 command) brakes and stands from model 4 but never finds a step. ``PPOConfig.stand_branch``
-gives the actor both: a second MLP (the same hidden layers) with its own action head and its
-own learned log-std, which acts on the rows whose command is exactly zero **and** whose
-contact state is model 4 (both feet down); every other row is the walker's. The gate is read
-from the observation (the command, pinned to m/s by
+gives the network both: a second actor (an MLP of the same hidden layers, its own action head
+and learned log-std) and a second critic, which act on the rows whose command is exactly zero
+**and** whose contact state is model 4 (both feet down); every other row is the walker's. The
+gate is read from the observation (the command, pinned to m/s by
 :func:`training.ppo.exploration.pin_command`, and the model one-hot), so the network alone
-maps an observation to its action; the critic is shared. At a zero command the walker
+maps an observation to its action. The branch's own critic matters: with the walker's critic
+on its rows, PPO (GAE, lambda < 1, biased by a wrong critic) took a stander started in the
+branch off standing within 0.5M env steps of its own task. At a zero command the walker
 finishes its step into double support, the branch brakes and stands there, and a foot that
 lifts hands the row back to the walker.
 
@@ -36,6 +38,8 @@ STAND_MODEL = N_MODELS
 """The contact state the branch acts in: model 4, both feet down."""
 MODE_ENTRY = OBS_MODE.start + STAND_MODEL - 1
 """The observation's entry of model 4's one-hot."""
+BRANCH_ACTOR = ("branch_net.", "branch_action.", "branch_log_std")
+"""Name prefixes of the branch actor's parameters (the others of the branch: its critic)."""
 MIN_STD_RATIO = 0.01
 """An entry whose standard deviation in the source's statistics is below this fraction of the
 run's barely varied there: the source's normalisation would blow the run's variation (and its
@@ -57,13 +61,20 @@ class InputMap(nn.Module):
         return torch.clamp(x * self.scale + self.shift, -self.clip, self.clip)
 
 
-class StandBranchPolicy(RowPolicy):
-    """An ``ActorCriticPolicy`` whose actor has a standing branch at a zero command in model 4.
+def _shape(m: nn.Module) -> tuple:
+    """The arguments that remake a layer of an MLP: Linear (in, out), an activation ()."""
+    return (m.in_features, m.out_features) if isinstance(m, nn.Linear) else ()
 
-    The branch: :class:`InputMap`, an MLP of the actor's hidden layers and activation, a
-    linear head of the actions' size and a learned log-std (``branch_log_std_init``); the
-    walker's modules and names are ``ActorCriticPolicy``'s. Rollout, update and prediction
-    compute one distribution from one stored observation, so PPO's ratio stays exact.
+
+class StandBranchPolicy(RowPolicy):
+    """An ``ActorCriticPolicy`` with a standing branch at a zero command in model 4.
+
+    The branch: :class:`InputMap`; an actor (an MLP of the walker's hidden layers and
+    activation, a linear head of the actions' size, a learned log-std,
+    ``branch_log_std_init``) and a critic (the same MLP shape, a linear value head, times the
+    fixed ``branch_value_scale``). The walker's modules and names are ``ActorCriticPolicy``'s.
+    Rollout, update and prediction compute one distribution and one value from one stored
+    observation, so PPO's ratio stays exact.
     """
 
     def __init__(self, *args, branch_log_std_init: float = -3.0, **kwargs):
@@ -87,9 +98,14 @@ class StandBranchPolicy(RowPolicy):
         self.branch_net = nn.Sequential(*layers)
         self.branch_action = nn.Linear(n_in, n_act)
         self.branch_log_std = nn.Parameter(torch.full((n_act,), self._branch_log_std_init))
+        self.branch_value_net = nn.Sequential(*[m.__class__(*_shape(m)) for m in layers])
+        self.branch_value = nn.Linear(n_in, 1)
+        self.register_buffer("branch_value_scale", torch.tensor(1.0))
         super()._build(lr_schedule)
-        if self.ortho_init:  # as SB3 initialises the walker's actor
-            for module, gain in ((self.branch_net, np.sqrt(2)), (self.branch_action, 0.01)):
+        if self.ortho_init:  # as SB3 initialises the walker's actor and critic
+            gains = ((self.branch_net, np.sqrt(2)), (self.branch_action, 0.01),
+                     (self.branch_value_net, np.sqrt(2)), (self.branch_value, 1.0))  # fmt: skip
+            for module, gain in gains:
                 module.apply(lambda m, g=gain: self.init_weights(m, gain=g))
 
     @staticmethod
@@ -108,6 +124,29 @@ class StandBranchPolicy(RowPolicy):
         else:
             self._gate, self._obs = self.gate(obs), self.extract_features(obs).float()
 
+    def forward(self, obs, deterministic: bool = False):
+        """SB3's rollout pass; the gated rows' values the branch's critic's."""
+        actions, values, log_prob = super().forward(obs, deterministic)
+        return actions, self._gated_values(obs, values), log_prob
+
+    def evaluate_actions(self, obs, actions):
+        """SB3's update pass; the gated rows' values the branch's critic's."""
+        values, log_prob, entropy = super().evaluate_actions(obs, actions)
+        return self._gated_values(obs, values), log_prob, entropy
+
+    def predict_values(self, obs):
+        """The values of ``obs`` (bootstrapping); the gated rows' the branch's critic's."""
+        return self._gated_values(obs, super().predict_values(obs))
+
+    def _gated_values(self, obs, values: torch.Tensor) -> torch.Tensor:
+        features = self.extract_features(obs).float()
+        return torch.where(self.gate(obs)[:, None], self.branch_values(features), values)
+
+    def branch_values(self, features: torch.Tensor) -> torch.Tensor:
+        """The branch critic's values of ``features`` (every row), in the run's return units."""
+        latent = self.branch_value_net(self.branch_input(features))
+        return self.branch_value(latent) * self.branch_value_scale
+
     def branch_mean(self, features: torch.Tensor) -> torch.Tensor:
         """The branch's action mean of ``features`` (every row, gated or not)."""
         return self.branch_action(self.branch_net(self.branch_input(features)))
@@ -122,12 +161,14 @@ class StandBranchPolicy(RowPolicy):
 
 
 def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: np.ndarray,
-                run_var: np.ndarray, run_eps: float) -> None:  # fmt: skip
+                run_var: np.ndarray, run_eps: float, run_ret_var: float = 1.0) -> None:  # fmt: skip
     """Start ``policy``'s branch from another run's actor (in place).
 
     ``source``: that run's ``ActorCriticPolicy`` (the same hidden layers); ``source_norm``: its
     normaliser (:func:`training.ppo.policy_io.read_normalizer`); ``run_mean``, ``run_var``,
-    ``run_eps``: the statistics this run normalises with now (pinned entries 0, 1). The
+    ``run_eps``: the statistics this run normalises with now (pinned entries 0, 1);
+    ``run_ret_var``: the variance of its returns (its rewards are divided by the square root:
+    the source's critic, which learned returns divided by its own, is rescaled to them). The
     branch's input map turns this run's normalised input into the source's: raw = x std + mean,
     then the source's ``clip((raw - mean) / sqrt(var + eps))``; entries that barely varied in
     the source's data (:data:`MIN_STD_RATIO`) read 0.
@@ -138,13 +179,19 @@ def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: 
     varied = src_std >= MIN_STD_RATIO * run_std
     scale = np.where(varied, run_std / src_std, 0.0)
     shift = np.where(varied, (run_mean - src_mean) / src_std, 0.0)
-    actor = source.mlp_extractor.policy_net
-    if [type(m) for m in actor] != [type(m) for m in policy.branch_net]:
-        raise ValueError("the branch's source has other hidden layers than this run's actor")
+    actor, critic = source.mlp_extractor.policy_net, source.mlp_extractor.value_net
+    for theirs, mine in ((actor, policy.branch_net), (critic, policy.branch_value_net)):
+        if [type(m) for m in theirs] != [type(m) for m in mine]:
+            raise ValueError("the branch's source has other hidden layers than this run's")
+    eps = source_norm["epsilon"]
+    value_scale = np.sqrt(source_norm["ret_var"] + eps) / np.sqrt(run_ret_var + eps)
     with torch.no_grad():
         policy.branch_net.load_state_dict(actor.state_dict())
         policy.branch_action.load_state_dict(source.action_net.state_dict())
         policy.branch_log_std.copy_(source.log_std)
+        policy.branch_value_net.load_state_dict(critic.state_dict())
+        policy.branch_value.load_state_dict(source.value_net.state_dict())
+        policy.branch_value_scale.fill_(float(value_scale))
         policy.branch_input.scale.copy_(torch.as_tensor(scale, dtype=torch.float32))
         policy.branch_input.shift.copy_(torch.as_tensor(shift, dtype=torch.float32))
         policy.branch_input.clip.fill_(float(source_norm["clip_obs"]))

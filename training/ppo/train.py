@@ -321,7 +321,8 @@ def _branch_start(cfg: PPOConfig, vecnorm, policy) -> dict:
     try:
         source, norm, which, digest = load_source(src)
         stats = vecnorm.obs_rms
-        branch_from(policy, source, norm, stats.mean, stats.var, vecnorm.epsilon)
+        branch_from(policy, source, norm, stats.mean, stats.var, vecnorm.epsilon,
+                    float(vecnorm.ret_rms.var))  # fmt: skip
     except ValueError as e:
         raise Refusal(f"train_ppo: error: --stand-branch-from: {e}") from None
     print(f"the standing branch starts from {src} ({which}/, weights sha256 {digest[:12]})",
