@@ -138,6 +138,7 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"stand_branch": True, "use_sde": True, **COMMAND}, "use_sde"),
         ({"stand_branch_from": "x", **COMMAND}, "goes with --stand-branch and --init-from"),
         ({"stand_branch": True, "stand_branch_from": "x", **COMMAND}, "--init-from"),
+        ({"stand_branch_frozen": True, **COMMAND}, "goes with --stand-branch"),
         ({"stand_branch": True, "stand_branch_from": "x", "init_from": "y",
           "init_normalizer": "fresh", **COMMAND}, "snapshot"),
     ],
@@ -196,6 +197,19 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     # the run's observation statistics stayed the start's (the map is exact for them)
     np.testing.assert_array_equal(norm.mean, w_norm.mean)
     np.testing.assert_array_equal(norm.var, w_norm.var)
+    # a stage with the branch's actor frozen: it stays the stander's; its critic learns
+    rc = train_ppo.main([*flags, "--learning-rate", "1e-2", "--out-dir", str(tmp_path / "f"),
+                         "--init-from", str(run), "--stand-branch", "--stand-branch-frozen",
+                         "--critic-warmup", "1"])  # fmt: skip
+    assert rc == 0
+    (frozen,) = (tmp_path / "f" / "train_ppo").iterdir()
+    after, _, _, _ = load_policy(frozen, "final")
+    for name, v in after.state_dict().items():
+        same = torch.equal(v, policy.state_dict()[name])
+        if name.startswith(("branch_net.", "branch_action.", "branch_log_std")):
+            assert same, name
+        elif name in ("value_net.weight", "action_net.weight"):
+            assert not same, name  # the test could fail: the rest learned
     # a later stage from it keeps its branch and needs the option
     rc = train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(run),
                          "--stand-branch"])  # fmt: skip

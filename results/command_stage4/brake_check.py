@@ -1,8 +1,9 @@
 """The stop row and the zero-command check from the brake and stand starts, on development seeds.
 
-python brake_check.py RUN {best,final} [N] -> stdout: the protocol's stop and restart rows on N
-development episodes (seeds 700000+, default 30), then 20 episodes each from the "brake" start
-(model 4 moving forward at 0-0.8 m/s) and the "stand" start at a zero command, 8 s: how many
+python brake_check.py RUN {best,final,checkpoint} [N] -> stdout: the protocol's stop and restart
+rows on N development episodes (seeds 700000+, default 30; 0: none), then 20 episodes each from
+the "brake" start (model 4 moving forward at 0-0.8 m/s) and the "stand" start at a zero
+command, 8 s: how many
 last 8 s, how many of those are still (mean |hip speed| < 0.05 m/s over the last 2 s), the
 speeds they move at instead and how the others end.
 """
@@ -24,7 +25,8 @@ n = int(sys.argv[3]) if len(sys.argv) > 3 else 30
 policy, norm, cfg, state = load_policy(run, which)
 print(f"# {which}/ at {state['num_timesteps']} env steps")
 batch = policy_batch_actor(policy, norm, cfg)
-for row in cp.stop_rows(batch, cfg.env_kwargs(), list(range(700000, 700000 + n)), cfg.env_id):
+for row in cp.stop_rows(batch, cfg.env_kwargs(), list(range(700000, 700000 + n)), cfg.env_id)\
+        if n else ():  # fmt: skip
     s = row["success"]
     drift = f", drift {row['drift_m_s_mean']:.2f} m/s" if "drift_m_s_mean" in row else ""
     print(f"{row['row']}: {s['successes']} of {s['episodes']}{drift}")

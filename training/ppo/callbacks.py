@@ -36,14 +36,14 @@ PPO_CKPT = "checkpoints/latest"
 def critic_warmup(cfg: PPOConfig, anchor=None):
     """A callback: the actor frozen for the first ``cfg.critic_warmup`` rollouts.
 
-    The actor: the walker's, and a standing branch's
-    (:data:`training.ppo.stand_branch.BRANCH_ACTOR`).
+    The actor: the walker's, and a standing branch's unless ``stand_branch_frozen`` holds it
+    frozen for the whole run (:func:`training.ppo.stand_branch.actor_parameters`).
     With ``anchor`` (an :class:`training.ppo.imitation.Anchor`) it also takes
     ``cfg.bc_anchor_steps`` behaviour-cloning steps after every PPO update.
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from training.ppo.stand_branch import BRANCH_ACTOR
+    from training.ppo.stand_branch import actor_parameters
 
     class CriticWarmup(BaseCallback):
         def __init__(self):
@@ -65,11 +65,12 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
             self.rollouts += 1
             p = self.model.policy
             frozen = self.rollouts <= cfg.critic_warmup
+            branch = [] if cfg.stand_branch_frozen else actor_parameters(p)  # frozen: stays so
             for param in [
                 *p.mlp_extractor.policy_net.parameters(),
                 *p.action_net.parameters(),
                 p.log_std,
-                *(q for name, q in p.named_parameters() if name.startswith(BRANCH_ACTOR)),
+                *branch,
             ]:
                 param.requires_grad_(not frozen)
 

@@ -126,6 +126,8 @@ class PPOConfig:
     stand_branch_from: str = ""  # with stand_branch and init_from: a policy directory whose
     # actor (and learned std) starts the branch instead of a random one; the run's observation
     # statistics then stay the start's (the returns' still move)
+    stand_branch_frozen: bool = False  # with stand_branch: the branch's actor does not learn
+    # (its critic does): a stage in which only the walker learns to hand over to it
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)
@@ -204,6 +206,8 @@ class PPOConfig:
         """Refuse ``stand_std_nm`` or ``stand_branch`` where they mean nothing."""
         if self.stand_branch_from and not (self.stand_branch and self.init_from):
             raise ValueError("--stand-branch-from goes with --stand-branch and --init-from")
+        if self.stand_branch_frozen and not self.stand_branch:
+            raise ValueError("--stand-branch-frozen goes with --stand-branch")
         if self.stand_branch_from and self.init_normalizer != "snapshot":
             raise ValueError("--stand-branch-from maps the start's normalised input: it needs "
                              "--init-normalizer snapshot")  # fmt: skip

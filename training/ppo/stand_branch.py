@@ -61,6 +61,17 @@ class InputMap(nn.Module):
         return torch.clamp(x * self.scale + self.shift, -self.clip, self.clip)
 
 
+def actor_parameters(policy) -> list:
+    """The branch actor's parameters of ``policy`` (:data:`BRANCH_ACTOR`; none without a branch)."""
+    return [q for name, q in policy.named_parameters() if name.startswith(BRANCH_ACTOR)]
+
+
+def freeze_actor(policy) -> None:
+    """Keep the branch's actor as it is: no gradient reaches it, so Adam never moves it."""
+    for q in actor_parameters(policy):
+        q.requires_grad_(False)
+
+
 def _shape(m: nn.Module) -> tuple:
     """The arguments that remake a layer of an MLP: Linear (in, out), an activation ()."""
     return (m.in_features, m.out_features) if isinstance(m, nn.Linear) else ()

@@ -410,6 +410,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         model = _start_from(cfg, run, vecnorm, fs)
     else:
         model = make_model(cfg, vecnorm, fs)
+    if cfg.stand_branch_frozen:  # new or resumed: its actor never learns
+        from training.ppo.stand_branch import freeze_actor
+
+        freeze_actor(model.policy)
     if model.num_timesteps == 0:
         try:
             initial_actions(model, cfg)
