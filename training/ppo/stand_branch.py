@@ -24,8 +24,6 @@ entries that barely varied in the other run's statistics read 0, as they did the
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import torch
 from torch import nn
@@ -211,40 +209,3 @@ def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: 
 def walker_weights(policy: StandBranchPolicy) -> dict[str, torch.Tensor]:
     """The state dict of ``policy`` without the branch: an ``MlpPolicy``'s names."""
     return {k: v for k, v in policy.state_dict().items() if not k.startswith("branch_")}
-
-
-def load_source(path: Path):
-    """(policy, normaliser dict, snapshot name, weights' SHA-256) of a policy directory.
-
-    Its published snapshot, read once and checked as any untrusted snapshot (nothing
-    unpickled or imported): a plain actor with observation statistics.
-    """
-    import hashlib
-
-    from training.plumbing.safe_files import inside
-    from training.ppo.policy_io import (
-        NORMALIZER_FILE,
-        POLICY_FILE,
-        build_policy,
-        check_weights,
-        load_weights,
-        open_snapshot,
-        published_snapshot,
-        read_config,
-        read_normalizer,
-    )
-
-    cfg = read_config(path)
-    if cfg.stand_branch:
-        raise ValueError(f"{path} has a standing branch itself: give a plain actor")
-    which, _ = published_snapshot(path)
-    snap = open_snapshot(path, which)
-    inside(Path(path), snap.path)
-    check_weights(cfg, snap)
-    policy = build_policy(cfg)
-    load_weights(policy, snap)
-    raw = snap.files.get(NORMALIZER_FILE)
-    d = None if raw is None else read_normalizer(snap.name(NORMALIZER_FILE), cfg.obs_dim(), raw)
-    if d is None or not d["norm_obs"]:
-        raise ValueError(f"{path}: its snapshot holds no observation statistics")
-    return policy, d, which, hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()

@@ -40,7 +40,7 @@ from training.plumbing.common import (
     parse_config,
 )
 from training.plumbing.outputs import OutDir, RunLock, check_tree
-from training.plumbing.safe_files import read_npz
+from training.plumbing.safe_files import inside, read_npz
 from training.ppo.build import initial_actions, make_model, training_env
 from training.ppo.callbacks import (
     check_restart_checked,
@@ -311,15 +311,37 @@ def _has_branch(src: Path) -> bool:
         return False
 
 
+def _branch_source(path: Path):
+    """(policy, normaliser dict, snapshot name, weights' SHA-256) of a policy directory.
+
+    Its published snapshot, read once and checked as any untrusted snapshot (nothing
+    unpickled or imported): a plain actor with observation statistics.
+    """
+    cfg = read_config(path)
+    if cfg.stand_branch:
+        raise ValueError(f"{path} has a standing branch itself: give a plain actor")
+    which, _ = published_snapshot(path)
+    snap = open_snapshot(path, which)
+    inside(Path(path), snap.path)
+    check_weights(cfg, snap)
+    policy = build_policy(cfg)
+    load_weights(policy, snap)
+    raw = snap.files.get(NORMALIZER_FILE)
+    d = None if raw is None else read_normalizer(snap.name(NORMALIZER_FILE), cfg.obs_dim(), raw)
+    if d is None or not d["norm_obs"]:
+        raise ValueError(f"{path}: its snapshot holds no observation statistics")
+    return policy, d, which, hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
+
+
 def _branch_start(cfg: PPOConfig, vecnorm, policy) -> dict:
     """Start the branch from ``cfg.stand_branch_from``'s actor; (where, its weights' SHA-256)."""
-    from training.ppo.stand_branch import branch_from, load_source
+    from training.ppo.stand_branch import branch_from
 
     src = Path(cfg.stand_branch_from)
     if not src.is_dir():
         raise Refusal(f"train_ppo: error: --stand-branch-from: {src}: no such policy directory")
     try:
-        source, norm, which, digest = load_source(src)
+        source, norm, which, digest = _branch_source(src)
         stats = vecnorm.obs_rms
         branch_from(policy, source, norm, stats.mean, stats.var, vecnorm.epsilon,
                     float(vecnorm.ret_rms.var))  # fmt: skip
