@@ -9,11 +9,12 @@ and learned log-std) and a second critic, which act on the rows whose command is
 **and** whose contact state is model 4 (both feet down); every other row is the walker's. The
 gate is read from the observation (the command, pinned to m/s by
 :func:`training.ppo.exploration.pin_command`, and the model one-hot), so the network alone
-maps an observation to its action. The branch's own critic matters: with the walker's critic
-on its rows, PPO (GAE, lambda < 1, biased by a wrong critic) took a stander started in the
-branch off standing within 0.5M env steps of its own task. At a zero command the walker
-finishes its step into double support, the branch brakes and stands there, and a foot that
-lifts hands the row back to the walker.
+maps an observation to its action; a foot that lifts hands the row back to the walker. The
+design: at a zero command the walker finishes its step into double support and the branch
+brakes and stands there. What it gave (``results/command_stage5``): a stander in the branch
+keeps standing under PPO only at a small learning rate or frozen (``stand_branch_frozen``),
+and a walk's double support ends within one control period, so the branch gets a row only once
+the walker has nearly stopped; no run stopped.
 
 The branch reads the run's normalised observation through a fixed affine map and clip
 (:class:`InputMap`, buffers saved with the weights), so that a branch started from another
