@@ -101,6 +101,7 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
     src_mean, src_var = rng.normal(0, 1, 27), rng.uniform(0.01, 2.0, 27)
     src_var[[0, 16]] = 0.0  # entries that never varied in the source's data
     run_mean, run_var = rng.normal(0, 1, 27), rng.uniform(0.1, 3.0, 27)
+    run_mean[MODE_ENTRY] = 0.3  # a share of the run's data in model 4
     norm = {"obs_mean": src_mean, "obs_var": src_var, "epsilon": 1e-8, "clip_obs": 10.0,
             "ret_var": 4.0}  # fmt: skip
     policy = _policy()
@@ -122,6 +123,11 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         theirs_v = source.value_net(source.mlp_extractor.forward_critic(
             torch.as_tensor(x_src, dtype=torch.float32))).numpy()  # fmt: skip
     np.testing.assert_allclose(mine_v[inside], theirs_v[inside] * np.sqrt(4.0 / 9.0), atol=1e-5)
+    # statistics of nothing but model 4 would hide the model from the gate: refused
+    all_four = run_mean.copy()
+    all_four[MODE_ENTRY] = 1.0
+    with pytest.raises(ValueError, match="nothing but model 4"):
+        branch_from(_policy(), source, norm, all_four, run_var, 1e-8, 9.0)
     # an entry the source never saw vary reads 0 whatever its value now
     moved = x_run.copy()
     moved[:, 16] = 5.0

@@ -120,12 +120,12 @@ class PPOConfig:
     stand_balance: bool = False  # with stand_std_nm: those rows' advantages scaled by their
     # std over the learned std (geometric mean over joints), so that a row's pull on the
     # network's mean does not grow as its noise shrinks (training.ppo.exploration)
-    stand_branch: bool = False  # (task "command") the actor gets a standing branch: its own
-    # MLP, head and learned std, acting where the command is 0 in model 4 (both feet down);
-    # the command and hip speed then read in m/s (training.ppo.stand_branch)
+    stand_branch: bool = False  # (task "command") the network gets a standing branch: its
+    # own actor (MLP, head, learned std) and critic, acting where the command is 0 in model 4
+    # (both feet down); the command and hip speed then read in m/s (training.ppo.stand_branch)
     stand_branch_from: str = ""  # with stand_branch and init_from: a policy directory whose
-    # actor (and learned std) starts the branch instead of a random one; the run's observation
-    # statistics then stay the start's (the returns' still move)
+    # actor, learned std and critic start the branch instead of random ones; the run's
+    # observation statistics then stay the start's (the returns' still move)
     stand_branch_frozen: bool = False  # with stand_branch: the branch's actor does not learn
     # (its critic does): a stage in which only the walker learns to hand over to it
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's

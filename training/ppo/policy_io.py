@@ -632,6 +632,17 @@ def load_policy(run: Path, which: str | None = None):
     (:func:`check_weights`); needs the normaliser when the run normalised observations.
     Nothing is unpickled or imported.
     """
+    policy, stats, cfg, state, _ = open_policy(run, which)
+    return policy, ObsNormalizer(stats), cfg, state
+
+
+def open_policy(run: Path, which: str | None = None):
+    """:func:`load_policy`'s work: (policy, normaliser dict or None, config, state, snapshot).
+
+    The normaliser as :func:`read_normalizer` reads it (None: the network normalises its own
+    input, a teacher run); the :class:`~training.plumbing.safe_files.Snapshot` holds every file
+    as it was read, once.
+    """
     cfg = read_config(run)
     which = which or published_snapshot(run)[0]
     snap = open_snapshot(run, which)  # every file read once: no mixing with a replacement
@@ -648,15 +659,13 @@ def load_policy(run: Path, which: str | None = None):
         if d is not None and d["norm_obs"]:
             raise UntrustedFileError(f"{norm_path}: observation statistics in a run whose network "
                                      f"normalises its own input (a teacher run)")  # fmt: skip
-        norm = ObsNormalizer(None)
-    elif raw is None:
+        return policy, None, cfg, state, snap
+    if raw is None:
         raise UntrustedFileError(f"{norm_path}: missing")
-    else:
-        d = read_normalizer(norm_path, cfg.obs_dim(), raw)
-        if not d["norm_obs"]:
-            raise UntrustedFileError(f"{norm_path}: holds no observation statistics")
-        norm = ObsNormalizer(d)
-    return policy, norm, cfg, state
+    d = read_normalizer(norm_path, cfg.obs_dim(), raw)
+    if not d["norm_obs"]:
+        raise UntrustedFileError(f"{norm_path}: holds no observation statistics")
+    return policy, d, cfg, state, snap
 
 
 def policy_actor(policy, normalizer: ObsNormalizer, cfg):

@@ -123,7 +123,8 @@ class StandBranchPolicy(RowPolicy):
         """The rows the branch acts on: command (the last entry, in m/s) exactly 0, in model 4.
 
         The model-4 entry is normalised, ``(1 - mean) / std`` > 0 in model 4 and
-        ``-mean / std`` < 0 elsewhere (its mean lies in (0, 1)): read by its sign.
+        ``-mean / std`` <= 0 elsewhere: read by its sign, for a mean below 1 (statistics from
+        data that was not all model 4; :func:`branch_from` refuses held ones that were).
         """
         obs = obs.float()
         return (obs[..., -1] == 0) & (obs[..., MODE_ENTRY] > 0)
@@ -183,6 +184,9 @@ def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: 
     then the source's ``clip((raw - mean) / sqrt(var + eps))``; entries that barely varied in
     the source's data (:data:`MIN_STD_RATIO`) read 0.
     """
+    if not run_mean[MODE_ENTRY] < 1.0:
+        raise ValueError("the run's statistics saw nothing but model 4: the gate cannot read "
+                         "the model from them")  # fmt: skip
     src_mean, src_var = source_norm["obs_mean"], source_norm["obs_var"]
     run_std = np.sqrt(run_var + run_eps)
     src_std = np.sqrt(src_var + source_norm["epsilon"])
@@ -205,8 +209,3 @@ def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: 
         policy.branch_input.scale.copy_(torch.as_tensor(scale, dtype=torch.float32))
         policy.branch_input.shift.copy_(torch.as_tensor(shift, dtype=torch.float32))
         policy.branch_input.clip.fill_(float(source_norm["clip_obs"]))
-
-
-def walker_weights(policy: StandBranchPolicy) -> dict[str, torch.Tensor]:
-    """The state dict of ``policy`` without the branch: an ``MlpPolicy``'s names."""
-    return {k: v for k, v in policy.state_dict().items() if not k.startswith("branch_")}

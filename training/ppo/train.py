@@ -40,7 +40,7 @@ from training.plumbing.common import (
     parse_config,
 )
 from training.plumbing.outputs import OutDir, RunLock, check_tree
-from training.plumbing.safe_files import inside, read_npz
+from training.plumbing.safe_files import read_npz
 from training.ppo.build import initial_actions, make_model, training_env
 from training.ppo.callbacks import (
     check_restart_checked,
@@ -73,6 +73,7 @@ from training.ppo.policy_io import (
     load_optimizer,
     load_state,
     load_weights,
+    open_policy,
     open_snapshot,
     published_snapshot,
     read_config,
@@ -209,14 +210,15 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
         print(f"the start's network widened with zero columns for observation entries "
               f"{added}", flush=True)  # fmt: skip
     check_weights(cfg, snap)
-    if _has_branch(src) and not cfg.stand_branch:
+    start = _start_config(src)
+    if start is not None and start.stand_branch and not cfg.stand_branch:
         raise Refusal(f"train_ppo: error: --init-from: {src}'s network has a standing branch; "
                       f"give --stand-branch to this run too")  # fmt: skip
     model = make_model(cfg, vecnorm, fs)
-    _load_start(cfg, src, snap, model.policy)
+    _load_start(cfg, start, snap, model.policy)
     if cfg.pins_command:
         _command_in_m_s(src, snap, cfg, model.policy)
-    elif _stand_trained(src):
+    elif start is not None and start.pins_command:
         raise Refusal(f"train_ppo: error: --init-from: {src} was trained with --stand-std-nm "
                       f"or --stand-branch: its network reads the command and the hip speed in "
                       f"m/s; give one of them to this run too")  # fmt: skip
@@ -275,62 +277,45 @@ def _added_statistics(cfg: PPOConfig, added: list[int], resets: int = 16):
     return obs.mean(axis=0), np.maximum(obs.var(axis=0), 1e-6)
 
 
-def _stand_trained(src: Path) -> bool:
-    """Whether the policy directory's config (where it has one) reads the command in m/s."""
+def _start_config(src: Path):
+    """The start's config (None where the policy directory has none)."""
     try:
-        return read_config(src).pins_command
+        return read_config(src)
     except FileNotFoundError:
-        return False
+        return None
 
 
-def _load_start(cfg: PPOConfig, src: Path, snap, policy) -> None:
+def _load_start(cfg: PPOConfig, start, snap, policy) -> None:
     """Load the start's weights into ``policy``; a plain actor into a standing-branch run's.
 
-    A ``stand_branch`` run from a start without one takes the start's walker (every weight an
-    ``MlpPolicy`` has) and keeps its branch as built (random, or then from
-    ``stand_branch_from``).
+    ``start``: the start's config (None: it has none). A ``stand_branch`` run from a start
+    without one takes the start's walker (every weight an ``MlpPolicy`` has) and keeps its
+    branch as built (random, or then from ``stand_branch_from``).
     """
-    if not cfg.stand_branch or _has_branch(src):
+    if not cfg.stand_branch or (start is not None and start.stand_branch):
         load_weights(policy, snap)
         return
     from dataclasses import replace
-
-    from training.ppo.stand_branch import walker_weights
 
     plain = build_policy(replace(cfg, stand_branch=False, stand_branch_from=""))
     load_weights(plain, snap)
     missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
     assert not unexpected and all(k.startswith("branch_") for k in missing), (missing, unexpected)
-    assert set(walker_weights(policy)) == set(plain.state_dict())
-
-
-def _has_branch(src: Path) -> bool:
-    try:
-        return read_config(src).stand_branch
-    except FileNotFoundError:
-        return False
 
 
 def _branch_source(path: Path):
     """(policy, normaliser dict, snapshot name, weights' SHA-256) of a policy directory.
 
-    Its published snapshot, read once and checked as any untrusted snapshot (nothing
-    unpickled or imported): a plain actor with observation statistics.
+    Its published snapshot, read once and checked as any loaded policy
+    (:func:`~training.ppo.policy_io.open_policy`): a plain actor with observation statistics.
     """
-    cfg = read_config(path)
+    which, _ = published_snapshot(path)
+    policy, stats, cfg, _, snap = open_policy(path, which)
     if cfg.stand_branch:
         raise ValueError(f"{path} has a standing branch itself: give a plain actor")
-    which, _ = published_snapshot(path)
-    snap = open_snapshot(path, which)
-    inside(Path(path), snap.path)
-    check_weights(cfg, snap)
-    policy = build_policy(cfg)
-    load_weights(policy, snap)
-    raw = snap.files.get(NORMALIZER_FILE)
-    d = None if raw is None else read_normalizer(snap.name(NORMALIZER_FILE), cfg.obs_dim(), raw)
-    if d is None or not d["norm_obs"]:
-        raise ValueError(f"{path}: its snapshot holds no observation statistics")
-    return policy, d, which, hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
+    if stats is None:
+        raise ValueError(f"{path}: its network normalises its own input (no statistics to map)")
+    return policy, stats, which, hashlib.sha256(snap.files[POLICY_FILE]).hexdigest()
 
 
 def _branch_start(cfg: PPOConfig, vecnorm, policy) -> dict:
