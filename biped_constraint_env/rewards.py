@@ -359,7 +359,8 @@ class CommandRewardPart:
                                         core.clock.model_time_s(), rec[:, REC_STEPS],
                                         ~terminated, command,
                                         tau_sq=rec[:, REC_TAU_SQ],
-                                        first_phase=core.clock.opening)  # fmt: skip
+                                        first_phase=core.clock.opening,
+                                        switches=rec[:, REC_SWITCHES])  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1]

@@ -1,5 +1,7 @@
 """The command task: a commanded forward speed, observed, resampled, settable, and its reward."""
 
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -7,6 +9,8 @@ import pytest
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.command import CommandReward, Commands, CommandSettings
 from biped_constraint_env.settings import make_settings
+
+POLICY = Path(__file__).resolve().parents[1] / "policies" / "ppo_command_50hz"
 
 REST = [0.0, -0.1, 0.1, -0.3, -0.4, 0.7]
 KW = {"task": "command", "command": {"range": (0.0, 2.0), "zero_fraction": 0.2,
@@ -110,6 +114,57 @@ def test_command_reward_follows_the_command_and_pays_standing_at_zero():
                           **dict(args, modes=np.array([m, m])))  # fmt: skip
         assert out[:, 6].tolist() == pytest.approx([0.4 * np.exp(-4 * 0.25), 0.0])
         assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
+
+
+def test_the_arrive_term_pays_a_slow_entry_into_double_support_at_a_zero_command_once():
+    s = make_settings(task="command")
+    args = dict(hip_z=np.full(4, 2.95), swing_vy=np.ones(4), model_time_s=np.full(4, 0.01),
+                steps=np.zeros(4), alive=np.ones(4, bool), tau_sq=np.zeros(4))  # fmt: skip
+    off = CommandReward(s.reward, s.dt, 4)
+    col = list(off.specs).index(next(t for t in off.specs if t.name == "arrive"))
+    # rows: entered model 4 at 0.5 m/s; passed through it to model 1; held model 4 (no
+    # switch); entered model 4 while a speed is commanded
+    period = dict(args, modes=np.array([4, 1, 4, 4]), switches=np.array([1.0, 2.0, 0.0, 1.0]))
+    cmd = np.array([0.0, 0.0, 0.0, 1.0])
+    assert not off.terms(np.full(4, 0.5) * s.dt, command=cmd, **period)[:, col].any()  # off
+    on = CommandReward(make_settings(task="command", reward={
+        "kind": "command", "weights": {"arrive": 5.0}, "kernels": {"arrive": 16.0}}).reward,
+        s.dt, 4)  # fmt: skip
+    out = on.terms(np.full(4, 0.5) * s.dt, command=cmd, **period)
+    assert out[:, col].tolist() == pytest.approx([5.0 * np.exp(-16 * 0.25), 0.0, 0.0, 0.0])
+    assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
+    dead = on.terms(np.full(4, 0.5) * s.dt, command=cmd, **dict(period, alive=np.zeros(4, bool)))
+    assert not dead[:, col].any()  # a period ended by an event earns only its steps
+    with pytest.raises(ValueError, match="switches"):
+        on.terms(np.zeros(4), command=cmd, **dict(period, switches=None))
+
+
+def test_the_arrive_term_in_both_envs_is_paid_where_a_period_enters_model_4():
+    """The committed command policy walks on at a zero command: the single and the batched
+    env pay the same arrive term, and only in the periods that switch into model 4."""
+    from training.ppo.policy_io import load_policy, policy_batch_actor
+
+    policy, norm, cfg, _ = load_policy(POLICY)
+    act = policy_batch_actor(policy, norm, cfg)
+    kw = {**cfg.env_kwargs(), "start": "midstride",
+          "reward": {"kind": "command", "weights": {"arrive": 1.0}}}  # fmt: skip
+    single = gym.make(cfg.env_id, **kw)
+    venv = _vec(1, **kw)
+    obs, info = single.reset(seed=700000, options={"command": 0.0})
+    obs_v, _ = venv.reset(seed=700000, options={"command": 0.0})
+    assert np.array_equal(obs, obs_v[0])
+    entries = 0
+    for _ in range(100):  # 2 s: several steps
+        mode0 = info["mode"]
+        obs, _, term, trunc, info = single.step(act(obs[None, :])[0])
+        obs_v, _, _, _, info_v = venv.step(act(obs_v))
+        assert info["reward_arrive"] == info_v["reward_arrive"][0]
+        entered = mode0 != 4 and info["mode"] == 4 and len(info["switches"]) > 0
+        assert (info["reward_arrive"] > 0) == entered
+        entries += entered
+        if term or trunc:
+            break
+    assert entries >= 2
 
 
 def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
