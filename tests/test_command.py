@@ -116,55 +116,59 @@ def test_command_reward_follows_the_command_and_pays_standing_at_zero():
         assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
 
 
-def test_the_arrive_term_pays_a_slow_entry_into_double_support_at_a_zero_command_once():
+def test_the_hold_term_pays_a_whole_period_in_double_support_at_a_zero_command():
     s = make_settings(task="command")
-    args = dict(hip_z=np.full(4, 2.95), swing_vy=np.ones(4), model_time_s=np.full(4, 0.01),
+    args = dict(hip_z=np.full(4, 2.95), swing_vy=np.ones(4), model_time_s=np.full(4, 0.04),
                 steps=np.zeros(4), alive=np.ones(4, bool), tau_sq=np.zeros(4))  # fmt: skip
     off = CommandReward(s.reward, s.dt, 4)
-    col = list(off.specs).index(next(t for t in off.specs if t.name == "arrive"))
-    # rows: entered model 4 at 0.5 m/s; passed through it to model 1; held model 4 (no
-    # switch); entered model 4 while a speed is commanded
-    period = dict(args, modes=np.array([4, 1, 4, 4]), switches=np.array([1.0, 2.0, 0.0, 1.0]))
+    col = [t.name for t in off.specs].index("hold")
+    # rows: a whole period in model 4 at 1.5 m/s; one that entered model 4; one that left it
+    # (ends in model 1); a whole period in model 4 while a speed is commanded
+    period = dict(args, modes=np.array([4, 4, 1, 4]), switches=np.array([0.0, 1.0, 1.0, 0.0]))
     cmd = np.array([0.0, 0.0, 0.0, 1.0])
-    assert not off.terms(np.full(4, 0.5) * s.dt, command=cmd, **period)[:, col].any()  # off
+    assert not off.terms(np.full(4, 1.5) * s.dt, command=cmd, **period)[:, col].any()  # off
     on = CommandReward(make_settings(task="command", reward={
-        "kind": "command", "weights": {"arrive": 5.0}, "kernels": {"arrive": 16.0}}).reward,
-        s.dt, 4)  # fmt: skip
-    out = on.terms(np.full(4, 0.5) * s.dt, command=cmd, **period)
-    assert out[:, col].tolist() == pytest.approx([5.0 * np.exp(-16 * 0.25), 0.0, 0.0, 0.0])
+        "kind": "command", "weights": {"hold": 0.5}}).reward, s.dt, 4)  # fmt: skip
+    out = on.terms(np.full(4, 1.5) * s.dt, command=cmd, **period)
+    assert out[:, col].tolist() == pytest.approx([0.5 * np.exp(-0.25 * 2.25), 0.0, 0.0, 0.0])
+    assert out[0, 0] < 0.2 * np.exp(-0.25 * 2.25)  # where the speed term pays less than walking
     assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
-    dead = on.terms(np.full(4, 0.5) * s.dt, command=cmd, **dict(period, alive=np.zeros(4, bool)))
+    dead = on.terms(np.full(4, 1.5) * s.dt, command=cmd, **dict(period, alive=np.zeros(4, bool)))
     assert not dead[:, col].any()  # a period ended by an event earns only its steps
     with pytest.raises(ValueError, match="switches"):
         on.terms(np.zeros(4), command=cmd, **dict(period, switches=None))
 
 
-def test_the_arrive_term_in_both_envs_is_paid_where_a_period_enters_model_4():
-    """The committed command policy walks on at a zero command: the single and the batched
-    env pay the same arrive term, and only in the periods that switch into model 4."""
+def test_the_hold_term_in_both_envs_is_paid_where_a_period_stays_in_model_4():
+    """From a standing start at a zero command, a joint PD hold of the start's posture keeps
+    model 4, then the committed command policy walks off: the single and the batched env pay
+    the same hold term, exactly in the periods that begin and end in model 4 with no switch."""
     from training.ppo.policy_io import load_policy, policy_batch_actor
 
     policy, norm, cfg, _ = load_policy(POLICY)
-    act = policy_batch_actor(policy, norm, cfg)
-    kw = {**cfg.env_kwargs(), "start": "midstride",
-          "reward": {"kind": "command", "weights": {"arrive": 1.0}}}  # fmt: skip
+    walker = policy_batch_actor(policy, norm, cfg)
+    kw = {**cfg.env_kwargs(), "start": "stand",
+          "reward": {"kind": "command", "weights": {"hold": 1.0}}}  # fmt: skip
     single = gym.make(cfg.env_id, **kw)
     venv = _vec(1, **kw)
     obs, info = single.reset(seed=700000, options={"command": 0.0})
     obs_v, _ = venv.reset(seed=700000, options={"command": 0.0})
-    assert np.array_equal(obs, obs_v[0])
-    entries = 0
-    for _ in range(100):  # 2 s: several steps
+    assert np.array_equal(obs, obs_v[0]) and info["mode"] == 4
+    q0 = single.unwrapped.state.q[1:].copy()
+    paid = []
+    for k in range(20):
+        st = single.unwrapped.state
+        a = -100.0 * (st.q[1:] - q0) - 10.0 * st.qd[1:] if k < 10 else walker(obs[None, :])[0]
         mode0 = info["mode"]
-        obs, _, term, trunc, info = single.step(act(obs[None, :])[0])
-        obs_v, _, _, _, info_v = venv.step(act(obs_v))
-        assert info["reward_arrive"] == info_v["reward_arrive"][0]
-        entered = mode0 != 4 and info["mode"] == 4 and len(info["switches"]) > 0
-        assert (info["reward_arrive"] > 0) == entered
-        entries += entered
+        obs, _, term, trunc, info = single.step(a)
+        obs_v, _, _, _, info_v = venv.step(a[None, :])
+        assert info["reward_hold"] == info_v["reward_hold"][0]
+        whole = mode0 == 4 and info["mode"] == 4 and not info["switches"]
+        assert (info["reward_hold"] > 0) == (whole and not term)
+        paid.append(info["reward_hold"] > 0)
         if term or trunc:
             break
-    assert entries >= 2
+    assert all(paid[:10]) and not any(paid[10:]) and len(paid) > 10  # held, then walked off
 
 
 def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
