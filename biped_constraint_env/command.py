@@ -30,7 +30,12 @@ stops at a zero command:
   on the way to a stop, not only once in model 4 (weight 0 by default: off);
 * ``hold``: at a zero command, weight * exp(-kernel * speed^2) for a period spent wholly in
   model 4 (double support), a broad kernel: braking in double support pays from its first
-  period, where the speed term still pays less than walking on (weight 0 by default: off).
+  period, where the speed term still pays less than walking on (weight 0 by default: off);
+* ``load``: at a zero command, for a period that starts in model 4, weight * exp(-kernel *
+  (min(0, f_n) / 100 N)^2) of the old stance toe's normal force f_n at the period's start
+  under its torques (torque actions): a walker that lifts that toe at once (f_n < 0, the
+  switch to model 1) is paid more the less it pulls, a gradient toward staying in double
+  support where the switch itself gives none (weight 0 by default: off).
 
 ``gated`` multiplies the speed, height and swing terms by the cadence kernel, as the gait reward.
 Every term is positive; a period ended by an event earns only its steps.
@@ -45,7 +50,10 @@ import numpy as np
 
 from .actions import TORQUE_LIMIT_NM
 from .gait import GaitReward, cadence_targets, height_term, kernel, speed_term, swing_term
+from .hybrid import FC_CONTACT, nb_evaluate
+from .model import N_LINKS
 from .rewards import REWARD_KINDS, RewardTerm
+from .state import ST_MODE, ST_SIDE
 from .validation import check_mapping, check_real
 
 MAX_COMMAND_M_S = 5.0
@@ -222,6 +230,26 @@ def command_hold_term(r, p) -> np.ndarray:
     return np.where(held, kernel(r, "hold", p.speed), 0.0)
 
 
+LOAD_SCALE_N = 100.0
+"""The load term's force scale [N] (the model weighs 49 N)."""
+
+
+def command_load_term(r, p) -> np.ndarray:
+    """At a zero command, the kernel of min(0, f_n) / 100 N at a model-4 period's start; else 0.
+
+    ``p.contact_fn``: the old stance toe's normal force at the start of each row's period
+    under its torques, NaN where the period did not start in model 4
+    (:meth:`CommandReward.start_toe_force`).
+    """
+    if p.contact_fn is None:  # not computed: the term must be off
+        if r.weights["load"]:
+            raise ValueError("the load term needs the periods' starting contact forces")
+        return np.zeros_like(p.speed)
+    on = (p.command == 0.0) & ~np.isnan(p.contact_fn)
+    fn = np.where(on, p.contact_fn, 0.0)
+    return np.where(on, kernel(r, "load", np.minimum(fn, 0.0) / LOAD_SCALE_N), 0.0)
+
+
 def command_steps_term(r, p) -> np.ndarray:
     """The steps completed, each paid min(1, command / speed target) (none at zero)."""
     return np.clip(p.command / r.targets["speed"], 0.0, 1.0) * p.steps
@@ -248,6 +276,10 @@ REWARD_KINDS["command"] = (
     RewardTerm("still", 0.0, 4.0, value=command_still_term,
                doc="at a zero command, the kernel of (the period's mean hip speed [m/s])^2 in "
                    "every model, slowing paid on the way to a stop (weight 0: off)"),
+    RewardTerm("load", 0.0, 0.1, value=command_load_term,
+               doc="at a zero command, a period starting in model 4: the kernel of "
+                   "(min(0, the old stance toe's normal force at its start) / 100 N)^2 (weight 0: "
+                   "off)"),
     RewardTerm("hold", 0.0, 0.25, value=command_hold_term,
                doc="at a zero command, the kernel of (the period's mean hip speed [m/s])^2 in a "
                    "period spent wholly in model 4: braking in double support (weight 0: off)"),
@@ -263,3 +295,30 @@ class CommandReward(GaitReward):
     """
 
     KIND = "command"
+
+    @staticmethod
+    def start_toe_force(core) -> np.ndarray:
+        """(n,): the old stance toe's normal force [N] in model 4 under the period's torques.
+
+        The torques: ``core.buf.act``, clipped to the torque limit; NaN in other models.
+
+        The force the model-4 guard reads (it switches to model 1 at f_n <= 0), from the same
+        compiled solve the simulator uses, with each row's own robot (model randomisation).
+        """
+        if core.settings.action.kind != "torque":
+            raise ValueError("the load term needs torque actions (action='torque')")
+        buf, sim = core.buf, core.sim
+        out = np.full(core.n, np.nan)
+        iopt, fopt, _, _ = core.settings.physics.options.packed
+        limit = core.action_part.check_bound
+        tau6 = np.zeros(N_LINKS)
+        for i in np.flatnonzero(sim.ist[:, ST_MODE] == 4):
+            if not np.all(np.isfinite(buf.act[i])):
+                continue
+            side = int(sim.ist[i, ST_SIDE])
+            tau6[1:] = np.clip(buf.act[i], -limit, limit)
+            _, forces, _, _ = nb_evaluate(buf.chs[i, side], buf.scs[i, side], 4, sim.q[i],
+                                          sim.qd[i], tau6, 0.0, iopt, fopt, 0.0)  # fmt: skip
+            out[i] = forces[FC_CONTACT]
+        return out
+

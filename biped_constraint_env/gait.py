@@ -44,7 +44,9 @@ class Period:
     commanded speeds [m/s] it ran under (None: the gait reward's constant target);
     ``tau_sq``: sum(tau^2) of the period's torques [N^2 m^2] (its time mean where they vary);
     ``first_phase``: the rows still in a start near rest's first contact phase (None: none);
-    ``switches``: forward model switches in it (None: not recorded).
+    ``switches``: forward model switches in it (None: not recorded); ``contact_fn``: the point
+    contact's normal force at its start under its torques [N], NaN where not computed (None:
+    not computed at all).
     """
 
     speed: np.ndarray
@@ -57,6 +59,7 @@ class Period:
     tau_sq: np.ndarray | None = None
     first_phase: np.ndarray | None = None
     switches: np.ndarray | None = None
+    contact_fn: np.ndarray | None = None
 
 
 def kernel(reward, name: str, error) -> np.ndarray:
@@ -160,7 +163,7 @@ class GaitReward:
         self._live = [c for c, t in enumerate(self.specs) if t.per_period]
 
     def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive, command=None,
-              tau_sq=None, first_phase=None, switches=None):  # fmt: skip
+              tau_sq=None, first_phase=None, switches=None, contact_fn=None):  # fmt: skip
         """(n, k + 1): the terms (the kind's order) and their sum, after a period.
 
         ``progress_m``: the hip's forward progress in the period [m]; ``alive``: periods not
@@ -168,7 +171,7 @@ class GaitReward:
         rest as :class:`Period`'s.
         """
         p = Period(progress_m / self.dt, hip_z, swing_vy, modes, model_time_s, steps, command,
-                   tau_sq, first_phase, switches)  # fmt: skip
+                   tau_sq, first_phase, switches, contact_fn)  # fmt: skip
         out = np.empty((len(progress_m), len(self.specs) + 1))
         gate = None
         for c, t in enumerate(self.specs):

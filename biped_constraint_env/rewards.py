@@ -348,11 +348,18 @@ class CommandRewardPart:
     """``reward="command"``: the gait terms against each row's command (``core.commands``)."""
 
     def before(self, core):
-        """The commands the period runs under."""
-        return core.commands.v.copy()
+        """The commands the period runs under, and the load term's forces (None: off).
 
-    def after(self, core, command, terminated, skip):
+        :meth:`~.command.CommandReward.start_toe_force`: the old stance toe's normal force at
+        each row's start in model 4.
+        """
+        reward = core.command_reward
+        load = reward.weights["load"] != 0.0
+        return core.commands.v.copy(), (reward.start_toe_force(core) if load else None)
+
+    def after(self, core, snap, terminated, skip):
         """(terms, rewards) of the period against the command it ran under."""
+        command, contact_fn = snap
         rec, sim = core.buf.rew, core.sim
         out = core.command_reward.terms(rec[:, REC_PROGRESS], core.hip[:, 1],
                                         rec[:, REC_SWING_VY], sim.ist[:, ST_MODE],
@@ -360,7 +367,8 @@ class CommandRewardPart:
                                         ~terminated, command,
                                         tau_sq=rec[:, REC_TAU_SQ],
                                         first_phase=core.clock.opening,
-                                        switches=rec[:, REC_SWITCHES])  # fmt: skip
+                                        switches=rec[:, REC_SWITCHES],
+                                        contact_fn=contact_fn)  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1]

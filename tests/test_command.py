@@ -171,6 +171,67 @@ def test_the_hold_term_in_both_envs_is_paid_where_a_period_stays_in_model_4():
     assert all(paid[:10]) and not any(paid[10:]) and len(paid) > 10  # held, then walked off
 
 
+def test_the_load_term_pays_the_old_toes_force_at_a_model_4_periods_start():
+    s = make_settings(task="command")
+    on = CommandReward(make_settings(task="command", reward={
+        "kind": "command", "weights": {"load": 2.0}}).reward, s.dt, 4)  # fmt: skip
+    col = [t.name for t in on.specs].index("load")
+    args = dict(hip_z=np.full(4, 2.95), swing_vy=np.ones(4), model_time_s=np.full(4, 0.04),
+                steps=np.zeros(4), alive=np.ones(4, bool), tau_sq=np.zeros(4),
+                modes=np.array([1, 4, 4, 1]), switches=np.zeros(4))  # fmt: skip
+    # rows: pulling 300 N, pressing 50 N, not in model 4 (NaN), pulling under a speed command
+    fn = np.array([-300.0, 50.0, np.nan, -300.0])
+    out = on.terms(np.zeros(4), command=np.array([0.0, 0.0, 0.0, 1.0]), contact_fn=fn, **args)
+    assert out[:, col].tolist() == pytest.approx([2.0 * np.exp(-0.1 * 9.0), 2.0, 0.0, 0.0])
+    assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
+    off = CommandReward(s.reward, s.dt, 4)
+    assert not off.terms(np.zeros(4), command=np.zeros(4), **args)[:, col].any()
+    with pytest.raises(ValueError, match="contact forces"):
+        on.terms(np.zeros(4), command=np.zeros(4), **args)
+
+
+def test_the_load_terms_force_is_the_simulators_and_alike_in_both_envs():
+    """From a standing start at a zero command: a PD hold, then the committed policy walks off.
+    The force the term reads at each model-4 period's start equals the simulator's own solve
+    (``simulator.evaluate``) at that state and torque, and both envs pay the same."""
+    from biped_constraint_env.hybrid import FC_CONTACT
+    from biped_constraint_env.simulator import evaluate
+    from training.ppo.policy_io import load_policy, policy_batch_actor
+
+    policy, norm, cfg, _ = load_policy(POLICY)
+    walker = policy_batch_actor(policy, norm, cfg)
+    w = {"load": 1.0}
+    kw = {**cfg.env_kwargs(), "start": "stand", "reward": {"kind": "command", "weights": w}}
+    single = gym.make(cfg.env_id, **kw)
+    venv = _vec(1, **kw)
+    obs, info = single.reset(seed=700001, options={"command": 0.0})
+    obs_v, _ = venv.reset(seed=700001, options={"command": 0.0})
+    u = single.unwrapped
+    q0 = u.state.q[1:].copy()
+    kinds = set()
+    for k in range(12):
+        st = u.state
+        a = -100.0 * (st.q[1:] - q0) - 10.0 * st.qd[1:] if k < 6 else walker(obs[None, :])[0]
+        expected = evaluate(u.params, st, np.clip(a, -150, 150), u.options)[1][FC_CONTACT]
+        obs, _, term, trunc, info = single.step(a)
+        obs_v, _, _, _, info_v = venv.step(a[None, :])
+        assert info["reward_load"] == info_v["reward_load"][0]
+        if int(st.mode) == 4 and not term:
+            kern = np.exp(-0.1 * (min(0.0, expected) / 100.0) ** 2)
+            assert info["reward_load"] == pytest.approx(kern, rel=1e-9)
+            kinds.add(bool(expected > 0))
+        else:
+            assert info["reward_load"] == 0.0
+        if term or trunc:
+            break
+    assert kinds == {True, False}  # held (pressing), then lifted by the walker (pulling)
+    pd = gym.make("ConstrainedBiped-v0", task="command", action="pd",
+                  reward={"kind": "command", "weights": w})  # fmt: skip
+    pd.reset(seed=0, options={"command": 0.0})
+    with pytest.raises(ValueError, match="torque actions"):
+        pd.step(np.zeros(5))
+
+
 def test_a_held_contact_phase_ends_the_episode_only_while_moving_is_commanded():
     kw = {**KW, "termination": {"max_model_time_s": 0.1}}
     ended = {}
