@@ -321,4 +321,3 @@ class CommandReward(GaitReward):
                                           sim.qd[i], tau6, 0.0, iopt, fopt, 0.0)  # fmt: skip
             out[i] = forces[FC_CONTACT]
         return out
-
