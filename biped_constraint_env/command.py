@@ -32,10 +32,11 @@ stops at a zero command:
   model 4 (double support), a broad kernel: braking in double support pays from its first
   period, where the speed term still pays less than walking on (weight 0 by default: off);
 * ``load``: at a zero command, for a period that starts in model 4, weight * exp(-kernel *
-  (min(0, f_n) / 100 N)^2) of the old stance toe's normal force f_n at the period's start
-  under its torques (torque actions): a walker that lifts that toe at once (f_n < 0, the
-  switch to model 1) is paid more the less it pulls, a gradient toward staying in double
-  support where the switch itself gives none (weight 0 by default: off).
+  (min(0, f_n - target) / 100 N)^2) of the old stance toe's normal force f_n at the period's
+  start under its torques (torque actions; target 0 N by default): a walker that lifts that
+  toe at once (f_n < 0, the switch to model 1) is paid more the less it pulls, a gradient
+  toward staying in double support where the switch itself gives none (weight 0 by
+  default: off).
 
 ``gated`` multiplies the speed, height and swing terms by the cadence kernel, as the gait reward.
 Every term is positive; a period ended by an event earns only its steps.
@@ -235,7 +236,10 @@ LOAD_SCALE_N = 100.0
 
 
 def command_load_term(r, p) -> np.ndarray:
-    """At a zero command, the kernel of min(0, f_n) / 100 N at a model-4 period's start; else 0.
+    """At a zero command, the kernel of min(0, f_n - target) / 100 N at a model-4 period's start.
+
+    0 elsewhere. The target [N] (0 by default) asks for a margin: a force that only just
+    holds at the period's start falls below 0 within it as the body moves over the new foot.
 
     ``p.contact_fn``: the old stance toe's normal force at the start of each row's period
     under its torques, NaN where the period did not start in model 4
@@ -246,8 +250,8 @@ def command_load_term(r, p) -> np.ndarray:
             raise ValueError("the load term needs the periods' starting contact forces")
         return np.zeros_like(p.speed)
     on = (p.command == 0.0) & ~np.isnan(p.contact_fn)
-    fn = np.where(on, p.contact_fn, 0.0)
-    return np.where(on, kernel(r, "load", np.minimum(fn, 0.0) / LOAD_SCALE_N), 0.0)
+    short = np.minimum(np.where(on, p.contact_fn, 0.0) - r.targets["load"], 0.0)
+    return np.where(on, kernel(r, "load", short / LOAD_SCALE_N), 0.0)
 
 
 def command_steps_term(r, p) -> np.ndarray:
@@ -276,10 +280,10 @@ REWARD_KINDS["command"] = (
     RewardTerm("still", 0.0, 4.0, value=command_still_term,
                doc="at a zero command, the kernel of (the period's mean hip speed [m/s])^2 in "
                    "every model, slowing paid on the way to a stop (weight 0: off)"),
-    RewardTerm("load", 0.0, 0.1, value=command_load_term,
+    RewardTerm("load", 0.0, 0.1, target=0.0, value=command_load_term,
                doc="at a zero command, a period starting in model 4: the kernel of "
-                   "(min(0, the old stance toe's normal force at its start) / 100 N)^2 (weight 0: "
-                   "off)"),
+                   "(min(0, the old stance toe's normal force at its start - target [N]) / "
+                   "100 N)^2 (weight 0: off)"),
     RewardTerm("hold", 0.0, 0.25, value=command_hold_term,
                doc="at a zero command, the kernel of (the period's mean hip speed [m/s])^2 in a "
                    "period spent wholly in model 4: braking in double support (weight 0: off)"),

@@ -188,6 +188,13 @@ def test_the_load_term_pays_the_old_toes_force_at_a_model_4_periods_start():
     assert not off.terms(np.zeros(4), command=np.zeros(4), **args)[:, col].any()
     with pytest.raises(ValueError, match="contact forces"):
         on.terms(np.zeros(4), command=np.zeros(4), **args)
+    margin = CommandReward(make_settings(task="command", reward={
+        "kind": "command", "weights": {"load": 2.0}, "targets": {"load": 100.0}}).reward,
+        s.dt, 4)  # fmt: skip
+    out = margin.terms(np.zeros(4), command=np.zeros(4), contact_fn=fn, **args)
+    assert out[:, col].tolist() == pytest.approx(
+        [2.0 * np.exp(-0.1 * 16.0), 2.0 * np.exp(-0.1 * 0.25), 0.0, 2.0 * np.exp(-0.1 * 16.0)]
+    )
 
 
 def test_the_load_terms_force_is_the_simulators_and_alike_in_both_envs():
