@@ -13,8 +13,9 @@ maps an observation to its action; a foot that lifts hands the row back to the w
 design: at a zero command the walker finishes its step into double support and the branch
 brakes and stands there. What it gave (``results/command_stage5``): a stander in the branch
 keeps standing under PPO only at a small learning rate or frozen (``stand_branch_frozen``),
-and a walk's double support ends within one control period, so the branch gets a row only once
-the walker has nearly stopped; no run stopped.
+and the walker's torques lift the old toe at once, so a walk's double support ends within one
+control period and the branch gets a row only once the walker has nearly stopped; no run
+stopped. (The command reward's ``load`` term pays for pressing that toe instead.)
 
 The branch reads the run's normalised observation through a fixed affine map and clip
 (:class:`InputMap`, buffers saved with the weights), so that a branch started from another
