@@ -338,6 +338,8 @@ class TorqueActions:
 
     unit_actions = False
     bound_name = "torque limit"
+    holds_torques = True
+    """Whether ``act`` holds the period's torques themselves (False: the PD law makes them)."""
 
     def __init__(self, action: ActionSettings, n: int, reference=None):
         """For the validated ``action`` and ``n`` rows (``reference``: unused)."""
@@ -373,6 +375,7 @@ class PDTargets(TorqueActions):
     """
 
     unit_actions = True
+    holds_torques = False
     bound_name = PD_BOUND
 
     def __init__(self, action: ActionSettings, n: int, reference=None):

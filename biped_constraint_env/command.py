@@ -309,7 +309,7 @@ class CommandReward(GaitReward):
         The force the model-4 guard reads (it switches to model 1 at f_n <= 0), from the same
         compiled solve the simulator uses, with each row's own robot (model randomisation).
         """
-        if core.settings.action.kind != "torque":
+        if not core.action_part.holds_torques:
             raise ValueError("the load term needs torque actions (action='torque')")
         buf, sim = core.buf, core.sim
         out = np.full(core.n, np.nan)
