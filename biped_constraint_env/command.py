@@ -215,6 +215,15 @@ def command_still_term(r, p) -> np.ndarray:
     return np.where(p.command == 0.0, kernel(r, "still", p.speed), 0.0)
 
 
+def _unrecorded(r, value, term: str, what: str) -> bool:
+    """Whether a term's input ``value`` is missing (None); refused while the term is on."""
+    if value is not None:
+        return False
+    if r.weights[term]:
+        raise ValueError(f"the {term} term needs {what}")
+    return True
+
+
 def command_hold_term(r, p) -> np.ndarray:
     """At a zero command, the kernel of the speed of a period spent wholly in model 4; else 0.
 
@@ -223,9 +232,7 @@ def command_hold_term(r, p) -> np.ndarray:
     1.5 m/s at the hip after a 1.0 m/s walk), where the speed term's kernel pays less than the
     other models' fixed half weight: this term pays for staying in double support, braking.
     """
-    if p.switches is None:  # not recorded: the term must be off
-        if r.weights["hold"]:
-            raise ValueError("the hold term needs the period's model switches")
+    if _unrecorded(r, p.switches, "hold", "the period's model switches"):
         return np.zeros_like(p.speed)
     held = (p.command == 0.0) & (p.modes == STAND_MODEL) & (p.switches == 0)
     return np.where(held, kernel(r, "hold", p.speed), 0.0)
@@ -245,9 +252,7 @@ def command_load_term(r, p) -> np.ndarray:
     under its torques, NaN where the period did not start in model 4
     (:meth:`CommandReward.start_toe_force`).
     """
-    if p.contact_fn is None:  # not computed: the term must be off
-        if r.weights["load"]:
-            raise ValueError("the load term needs the periods' starting contact forces")
+    if _unrecorded(r, p.contact_fn, "load", "the periods' starting contact forces"):
         return np.zeros_like(p.speed)
     on = (p.command == 0.0) & ~np.isnan(p.contact_fn)
     short = np.minimum(np.where(on, p.contact_fn, 0.0) - r.targets["load"], 0.0)
@@ -316,12 +321,12 @@ class CommandReward(GaitReward):
         iopt, fopt, _, _ = core.settings.physics.options.packed
         limit = core.action_part.check_bound
         tau6 = np.zeros(N_LINKS)
-        for i in np.flatnonzero(sim.ist[:, ST_MODE] == 4):
+        for i in np.flatnonzero(sim.ist[:, ST_MODE] == STAND_MODEL):
             if not np.all(np.isfinite(buf.act[i])):
                 continue
             side = int(sim.ist[i, ST_SIDE])
             tau6[1:] = np.clip(buf.act[i], -limit, limit)
-            _, forces, _, _ = nb_evaluate(buf.chs[i, side], buf.scs[i, side], 4, sim.q[i],
+            _, forces, _, _ = nb_evaluate(buf.chs[i, side], buf.scs[i, side], STAND_MODEL, sim.q[i],
                                           sim.qd[i], tau6, 0.0, iopt, fopt, 0.0)  # fmt: skip
             out[i] = forces[FC_CONTACT]
         return out
