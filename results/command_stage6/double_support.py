@@ -1,8 +1,8 @@
 """Can double support hold and brake a walk told to stop? Two checks at the walk's own states.
 
-python double_support.py RUN WHICH N [COMMAND] [KV] -> stdout. N development episodes (seeds
+python double_support.py RUN WHICH N [COMMAND] [KV] [ENTRY] -> stdout. N development episodes (seeds
 700000+) from the mid-stride start at COMMAND (default 1.0 m/s) for 3 s, then a zero command.
-KV = 0: the first check only.
+KV = 0: the first check only; KV < 0: the third check only.
 
 1. ``entries``: at every control period that starts in model 4 (double support) over the next
    4 s, the old stance toe's normal force f_n [N] under the policy's torques, under zero
@@ -13,7 +13,13 @@ KV = 0: the first check only.
    hip's acceleration closest to -KV times its velocity (default 3 /s), then closest to a joint
    PD hold of the entry posture (100 N m/rad, 10 N m s/rad), with f_n >= 20 N and both ends of
    the stance foot >= 5 N; where that is infeasible, the torques that load all three most
-   evenly. Printed: how the episode ends, the hip's mean speed per period [m/s].
+   evenly. ENTRY (default 1): the law takes over at the walk's ENTRY-th period that starts in
+   model 4 (the policy's own torques before it). Printed: how the episode ends, the hip's mean
+   speed per period [m/s].
+3. ``static`` (KV < 0): at every period that starts in model 4 over the next 3 s, whether that
+   posture can be held at rest: the smallest sum of |joint accelerations| [rad/s^2] any torque
+   within the limits gives at the posture with the rates set to zero, with f_n >= 20 N and both
+   ends of the stance foot >= 5 N (a linear program; 0: a static hold exists).
 
 A model-based law, not a policy: it asks what the physics allows at the walk's own states.
 """
@@ -105,6 +111,20 @@ def brake_torque(env, st, q0, kv):
     return (res.x[:5] if res.success else pd), False
 
 
+def static_residual(env, st):
+    """Check 3 at ``st``: the smallest sum |qdd| of a hold at rest, or NaN (no loaded hold)."""
+    qdd0, f0, Q, F = forces_and_rates(env, dataclasses.replace(st, qd=np.zeros_like(st.qd)))
+    n = Q.shape[0]
+    A = [np.r_[-F[k], np.zeros(n)] for k in (FC_CONTACT, FC_TOE, FC_HEEL)]
+    b = [f0[FC_CONTACT] - FN_MIN, f0[FC_TOE] - FOOT_MIN, f0[FC_HEEL] - FOOT_MIN]
+    for i in range(n):  # -e_i <= qdd0_i + Q_i tau <= e_i
+        A += [np.r_[Q[i], -np.eye(n)[i]], np.r_[-Q[i], -np.eye(n)[i]]]
+        b += [-qdd0[i], qdd0[i]]
+    res = linprog(np.r_[np.zeros(5), np.ones(n)], A_ub=np.array(A), b_ub=np.array(b),
+                  bounds=[(-LIM, LIM)] * 5 + [(0, None)] * n)  # fmt: skip
+    return res.fun if res.success else float("nan")
+
+
 def walk_to_zero(cfg, act, seed, command):
     """A fresh env, the policy walking 3 s at ``command`` from mid-stride, then told 0."""
     env = gym.make(cfg.env_id, **cfg.env_kwargs())
@@ -121,11 +141,25 @@ def main():
     run, which, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
     command = float(sys.argv[4]) if len(sys.argv) > 4 else 1.0
     kv = float(sys.argv[5]) if len(sys.argv) > 5 else 3.0
+    entry = int(sys.argv[6]) if len(sys.argv) > 6 else 1
     policy, norm, cfg, state = load_policy(run, which)
     act = policy_actor(policy, norm, cfg)
     print(f"# {run} {which}/ at {state['num_timesteps']} env steps; command {command} m/s, then 0")
     for seed in range(700000, 700000 + n):
         env, obs, info, done = walk_to_zero(cfg, act, seed, command)
+        if kv < 0.0:
+            res = []
+            while info["t"] < 6.0 and not done:
+                if int(env.unwrapped.state.mode) == 4:
+                    res.append(static_residual(env, env.unwrapped.state))
+                obs, _, term, trunc, info = env.step(act(obs))
+                done = term or trunc
+            print(
+                seed,
+                f"static: {len(res)} model-4 periods; a hold at rest exists at"
+                f" {sum(r < 1e-6 for r in res)}; largest residual {max(res, default=0):.3g}",
+            )
+            continue
         entries = []
         while info["t"] < 7.0 and not done:
             st, a = env.unwrapped.state, act(obs)
@@ -140,10 +174,12 @@ def main():
         if kv == 0.0:
             continue
         env, obs, info, done = walk_to_zero(cfg, act, seed, command)
-        q0, speeds, lp = None, [], 0
+        q0, speeds, lp, seen, was4 = None, [], 0, 0, False
         while info["t"] < 11.0 and not done:
             st = env.unwrapped.state
-            if q0 is None and int(st.mode) == 4:
+            seen += q0 is None and int(st.mode) == 4 and not was4
+            was4 = int(st.mode) == 4
+            if q0 is None and seen == entry:
                 q0, t_in = st.q[1:].copy(), info["t"]
             if q0 is None:
                 a = act(obs)
