@@ -127,7 +127,11 @@ class ConstrainedBipedEnv(gym.Env):
     :mod:`.starts`): standing. ``start="brake"``: the standing start's draw moving, its hip
     forward at 0-0.8 m/s (``BRAKE_HIP_SPEED_RANGE_M_S``), the front foot flat, the rear toe
     still and the rear foot keeping its angle (:func:`~.starts.stand_rates`: model 4's
-    constraints hold exactly): the states a walk stops from. ``start="nudge"``: the rest
+    constraints hold exactly): the states a walk stops from. ``start="stride_stand"`` and
+    ``"stride_brake"``: the same two in a walk's double-support geometry (``STRIDE_STAND_*``:
+    the rear toe 0.5-0.8 m behind the front toe, its heel up 0.05-0.4 rad, the hip 0.55-0.85 m
+    behind the front toe at 2.8-2.92 m: where a walk told to stop enters double support, the
+    hip over or behind the rear toe). ``start="nudge"``: the rest
     start's posture in model 1 with the stance leg turning about the ankle at a rate uniform in
     ``NUDGE_RATE_RANGE_RAD_S``
     (-0.6 to 0.2 rad/s: forward, or slowly backward), the swing thigh keeping its direction: the
@@ -136,9 +140,9 @@ class ConstrainedBipedEnv(gym.Env):
     "midstride": 0.25}``; ``"mixed"`` is ``{"rest": 1, "midstride": 1}``). The
     ``"reference"`` component starts at a recorded state of the reference walk (below;
     ``start="reference"``: every start), drawn first by a draw of its own, the other
-    components then as a start of their own. All but "stand" and "brake" (the rear toe on
-    the ground exactly) add uniform noise in ``[-s, s]`` (``start={"reset_noise_scale": s}``,
-    0.01 rad) to q1..q5; the stance toe is at y = 0.
+    components then as a start of their own. All but "stand", "brake" and their "stride_"
+    forms (the rear toe on the ground exactly) add uniform noise in ``[-s, s]``
+    (``start={"reset_noise_scale": s}``, 0.01 rad) to q1..q5; the stance toe is at y = 0.
     ``reset(options={"q", "qd", "mode", "stance_side", "root_y"})`` starts from any state in
     the coordinates of docs/conventions.md (validated: points on or above the ground, model
     constraints satisfied; a ``ValueError`` names what is wrong).
@@ -197,8 +201,8 @@ class ConstrainedBipedEnv(gym.Env):
     | start | "midstride" | a start's name (Starting State), a dict of component weights, or |
     | | | a dict: "kind" (either), "posture" (``NOMINAL_POSTURE_RAD``: the rest posture [rad]), |
     | | | "reset_noise_scale" (0.01: noise on q1..q5 [rad]); the components "rest", |
-    | | | "midstride", "stride", "stand", "brake", "nudge", "reference" (recorded reference |
-    | | | states) |
+    | | | "midstride", "stride", "stand", "brake", "stride_stand", "stride_brake", "nudge", |
+    | | | "reference" (recorded reference states) |
     | reward | "env" | "env" (Rewards), "tracking" (a reference walk's; below), "gait" (the task |
     | | | and the contact clock, no recording; below), "command", or {"kind", "weights", |
     | | | "kernels", "targets", "gated", "first_phase_s"}: any term's weight, kernel or |
@@ -329,7 +333,8 @@ class ConstrainedBipedEnv(gym.Env):
       contact phase's periods under a speed command only (a restart from standing has the
       whole limit). Added: the command reward's ``effort`` term (weight 0: off); the
       ``"stand"`` start (model 4 at rest, both feet down) and the ``"brake"`` start (the
-      same, moving forward at 0-0.8 m/s); the ``"nudge"`` start (its rates
+      same, moving forward at 0-0.8 m/s), and both in a walk's double-support geometry
+      (``"stride_stand"``, ``"stride_brake"``); the ``"nudge"`` start (its rates
       -0.6 to 0.2 rad/s: rest inside them). Changed: the
       reference-state
       starts are the start mixture's ``"reference"`` component (``start={"kind": "mixed",

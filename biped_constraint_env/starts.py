@@ -44,6 +44,18 @@ STAND_TOE_Y_RANGE_M = (-1.15, -0.85)
 """Range of the rear toe's position at a standing start, from the front toe [m]."""
 STAND_HEEL_UP_RANGE_RAD = (0.05, 0.2)
 """Range of the rear foot's heel-up angle at a standing start [rad]."""
+STRIDE_STAND_HIP_Y_RANGE_M = (-0.85, -0.55)
+"""Range of the hip's position at a stride-stand start, from the front toe [m]: where a walk's
+double support begins, the hip over or behind the rear toe (a walk told to stop enters it at
+0.65-0.78 m behind the front toe)."""
+STRIDE_STAND_HIP_Z_RANGE_M = (2.8, 2.92)
+"""Range of the hip's height at a stride-stand start [m] (2.84-2.91 m in a walk's double
+support)."""
+STRIDE_STAND_TOE_Y_RANGE_M = (-0.8, -0.5)
+"""Range of the rear toe's position at a stride-stand start, from the front toe [m] (a slow
+walk's step: about 0.6 m)."""
+STRIDE_STAND_HEEL_UP_RANGE_RAD = (0.05, 0.4)
+"""Range of the rear foot's heel-up angle at a stride-stand start [rad]."""
 BRAKE_HIP_SPEED_RANGE_M_S = (0.0, 0.8)
 """Range of the hip's forward speed at a braking start [m/s]: the standing start moving, from
 at rest to a little faster than the command walkers walk on at a zero command (0.4-0.8 m/s)."""
@@ -256,26 +268,39 @@ def stand_rates(params: BipedParams, q: np.ndarray, hip_vy: float) -> np.ndarray
     return qd
 
 
-def _stand_posture(rng, params):
-    hip_y = _uniform(rng, *STAND_HIP_Y_RANGE_M)
-    hip_z = _uniform(rng, *STAND_HIP_Z_RANGE_M)
-    toe_y = _uniform(rng, *STAND_TOE_Y_RANGE_M)
-    heel_up = _uniform(rng, *STAND_HEEL_UP_RANGE_RAD)
-    return stand_start(params, hip_y, hip_z, toe_y, heel_up)
+STAND_RANGES = (STAND_HIP_Y_RANGE_M, STAND_HIP_Z_RANGE_M, STAND_TOE_Y_RANGE_M,
+                STAND_HEEL_UP_RANGE_RAD)  # fmt: skip
+STRIDE_STAND_RANGES = (STRIDE_STAND_HIP_Y_RANGE_M, STRIDE_STAND_HIP_Z_RANGE_M,
+                       STRIDE_STAND_TOE_Y_RANGE_M, STRIDE_STAND_HEEL_UP_RANGE_RAD)  # fmt: skip
 
 
-def _stand(rng, posture, params):
+def _stand_posture(rng, params, ranges=STAND_RANGES):
+    """:func:`stand_start` with its hip (y, z), rear toe and heel-up drawn from ``ranges``."""
+    return stand_start(params, *(_uniform(rng, *r) for r in ranges))
+
+
+def _stand(rng, posture, params, ranges=STAND_RANGES):
     """:func:`stand_start` with its hip and rear foot drawn, at rest in model 4."""
-    return _stand_posture(rng, params), np.zeros(N_LINKS), _DOUBLE_SUPPORT
+    return _stand_posture(rng, params, ranges), np.zeros(N_LINKS), _DOUBLE_SUPPORT
 
 
-def _brake(rng, posture, params):
+def _brake(rng, posture, params, ranges=STAND_RANGES):
     """The standing start's draw moving, its hip forward (:func:`stand_rates`).
 
     The speed uniform in :data:`BRAKE_HIP_SPEED_RANGE_M_S`: the states a walk stops from.
     """
-    q = _stand_posture(rng, params)
+    q = _stand_posture(rng, params, ranges)
     return q, stand_rates(params, q, _uniform(rng, *BRAKE_HIP_SPEED_RANGE_M_S)), _DOUBLE_SUPPORT
+
+
+def _stride_stand(rng, posture, params):
+    """:func:`_stand` in a walk's double-support geometry (:data:`STRIDE_STAND_RANGES`)."""
+    return _stand(rng, posture, params, STRIDE_STAND_RANGES)
+
+
+def _stride_brake(rng, posture, params):
+    """:func:`_brake` in a walk's double-support geometry (:data:`STRIDE_STAND_RANGES`)."""
+    return _brake(rng, posture, params, STRIDE_STAND_RANGES)
 
 
 def _nudge(rng, posture, params):
@@ -292,11 +317,12 @@ def _nudge(rng, posture, params):
 
 
 START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride, "stand": _stand,
-                    "nudge": _nudge, "brake": _brake}  # fmt: skip
+                    "nudge": _nudge, "brake": _brake, "stride_stand": _stride_stand,
+                    "stride_brake": _stride_brake}  # fmt: skip
 """The start components by name: each draws (q, qd, mode) from a row's generator, the rest
 posture and the robot, before the reset noise. A new start is one entry here (``start`` or a
 mixture ``start={"stride": 0.75, "midstride": 0.25}`` names it)."""
-EXACT_STARTS = frozenset({"stand", "brake"})
+EXACT_STARTS = frozenset({"stand", "brake", "stride_stand", "stride_brake"})
 """Components whose state meets a contact constraint exactly: no reset noise (their draws vary
 them)."""
 

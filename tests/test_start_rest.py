@@ -125,6 +125,54 @@ def test_brake_start_is_the_stand_moving_within_model_4_in_both_envs():
     np.testing.assert_allclose((ahead - behind) / (2 * h), qd, atol=1e-7)
 
 
+def test_stride_stand_starts_are_exact_double_supports_in_a_walks_geometry_in_both_envs():
+    """``start="stride_stand"`` / ``"stride_brake"``: the stand and brake starts drawn from the
+    walk's double-support ranges (``STRIDE_STAND_*``), at rest / with the hip moving forward,
+    model 4's constraints exact."""
+    from biped_constraint_env.kinematics import point_velocity
+    from biped_constraint_env.model import SC_TOE5
+    from biped_constraint_env.starts import (
+        BRAKE_HIP_SPEED_RANGE_M_S,
+        STRIDE_STAND_HEEL_UP_RANGE_RAD,
+        STRIDE_STAND_HIP_Y_RANGE_M,
+        STRIDE_STAND_HIP_Z_RANGE_M,
+        STRIDE_STAND_TOE_Y_RANGE_M,
+    )
+
+    for start in ("stride_stand", "stride_brake"):
+        env = gym.make("ConstrainedBiped-v0", start=start).unwrapped
+        venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
+                            start=start)  # fmt: skip
+        vobs, _ = venv.reset(seed=11)
+        chain = env.params.chain(0)
+        toe = float(chain.packed_scalars[SC_TOE5])
+        hips = []
+        for i in range(4):
+            obs, info = env.reset(seed=11 + i)
+            np.testing.assert_array_equal(obs, vobs[i])
+            st, kp = env.state, env.keypoints()
+            assert info["mode"] == 4 and st.q[0] == 0.0 and st.qd[0] == 0.0
+            assert abs(kp["stance_heel"][1]) < 1e-12 and abs(kp["swing_toe"][1]) < 1e-12
+            toe_lo, toe_hi = STRIDE_STAND_TOE_Y_RANGE_M
+            assert toe_lo <= kp["swing_toe"][0] <= toe_hi
+            assert STRIDE_STAND_HIP_Y_RANGE_M[0] <= kp["hip"][0] <= STRIDE_STAND_HIP_Y_RANGE_M[1]
+            assert STRIDE_STAND_HIP_Z_RANGE_M[0] <= kp["hip"][1] <= STRIDE_STAND_HIP_Z_RANGE_M[1]
+            heel_up = np.arcsin(
+                (kp["swing_heel"][1] - kp["swing_toe"][1]) / chain.links[5].length_m
+            )
+            lo, hi = STRIDE_STAND_HEEL_UP_RANGE_RAD
+            assert lo - 1e-9 <= heel_up <= hi + 1e-9
+            np.testing.assert_allclose(point_velocity(chain, st.q, st.qd, 5, toe), 0.0, atol=1e-12)
+            hip_v = point_velocity(chain, st.q, st.qd, 3, 0.0)
+            if start == "stride_stand":
+                assert not st.qd.any()
+            else:
+                assert BRAKE_HIP_SPEED_RANGE_M_S[0] <= hip_v[0] <= BRAKE_HIP_SPEED_RANGE_M_S[1]
+                assert abs(hip_v[1]) < 1e-12
+            hips.append(kp["hip"][0])
+        assert len(set(hips)) == 4  # drawn per row
+
+
 def _first_step(ctl, env_kw, seed=0, limit_s=5.0):
     env = gym.make("ConstrainedBiped-v0", **env_kw)
     obs, info = env.reset(seed=seed)
