@@ -131,7 +131,9 @@ class ConstrainedBipedEnv(gym.Env):
     ``"stride_brake"``: the same two in a walk's double-support geometry (``STRIDE_STAND_*``:
     the rear toe 0.5-0.8 m behind the front toe, its heel up 0.05-0.4 rad, the hip 0.55-0.85 m
     behind the front toe at 2.8-2.92 m: where a walk told to stop enters double support, the
-    hip over or behind the rear toe). ``start="nudge"``: the rest
+    hip over or behind the rear toe; "stride_brake" also with the hip coming down at 0-0.5 m/s
+    and the rear heel rising at 0-3 rad/s, as a walk enters double support).
+    ``start="nudge"``: the rest
     start's posture in model 1 with the stance leg turning about the ankle at a rate uniform in
     ``NUDGE_RATE_RANGE_RAD_S``
     (-0.6 to 0.2 rad/s: forward, or slowly backward), the swing thigh keeping its direction: the

@@ -56,6 +56,12 @@ STRIDE_STAND_TOE_Y_RANGE_M = (-0.8, -0.5)
 walk's step: about 0.6 m)."""
 STRIDE_STAND_HEEL_UP_RANGE_RAD = (0.05, 0.4)
 """Range of the rear foot's heel-up angle at a stride-stand start [rad]."""
+STRIDE_BRAKE_HIP_VZ_RANGE_M_S = (-0.5, 0.0)
+"""Range of the hip's upward speed at a stride-brake start [m/s]: a walk enters double support
+with the hip coming down (0.26-0.54 m/s after a walk told to stop)."""
+STRIDE_BRAKE_HEEL_RATE_RANGE_RAD_S = (0.0, 3.0)
+"""Range of the rear heel's rising rate at a stride-brake start [rad/s]: the rear foot turning
+about its toe as a walk enters double support (1-1.8 rad/s there, then up to 5)."""
 BRAKE_HIP_SPEED_RANGE_M_S = (0.0, 0.8)
 """Range of the hip's forward speed at a braking start [m/s]: the standing start moving, from
 at rest to a little faster than the command walkers walk on at a zero command (0.4-0.8 m/s)."""
@@ -248,12 +254,15 @@ def stand_start(
     return wrap_angles(rel)
 
 
-def stand_rates(params: BipedParams, q: np.ndarray, hip_vy: float) -> np.ndarray:
-    """The joint rates qd (6,) [rad/s] of model-4 stance ``q`` moving with its hip at (hip_vy, 0).
+def stand_rates(
+    params: BipedParams, q: np.ndarray, hip_vy: float, hip_vz: float = 0.0, heel_rate: float = 0.0
+) -> np.ndarray:
+    """The joint rates qd (6,) [rad/s] of model-4 stance ``q``, its hip moving at (hip_vy, hip_vz).
 
     Model 4's constraints hold exactly to round-off: the front foot stays flat (qd[0] = 0) and
-    the rear toe still; the rear foot keeps its heel-up angle (its rate 0), which leaves the
-    hip's velocity (hip_vy [m/s] forward, 0 up) to fix the other rates: one linear solve.
+    the rear toe still; the rear foot turns about its toe with its heel rising at ``heel_rate``
+    [rad/s] (0 by default: it keeps its heel-up angle), which leaves the hip's velocity
+    (hip_vy [m/s] forward, hip_vz up; 0 by default) to fix the other rates: one linear solve.
     """
     chain = params.chain(0)
     rows = np.zeros((N_LINKS, N_LINKS))
@@ -261,8 +270,9 @@ def stand_rates(params: BipedParams, q: np.ndarray, hip_vy: float) -> np.ndarray
     rows[0, 0] = 1.0  # the front foot flat
     rows[1:3] = point_jacobian(chain, q, 5, float(chain.packed_scalars[SC_TOE5]))  # rear toe
     rows[3:5] = point_jacobian(chain, q, 3, 0.0)  # the hip (link 3's origin)
-    rhs[3] = hip_vy
+    rhs[3], rhs[4] = hip_vy, hip_vz
     rows[5] = 1.0  # the rear foot's absolute rate: the sum of the relative rates
+    rhs[5] = -heel_rate  # the heel rising turns the foot backward
     qd = np.linalg.solve(rows, rhs)
     qd[0] = 0.0
     return qd
@@ -299,8 +309,16 @@ def _stride_stand(rng, posture, params):
 
 
 def _stride_brake(rng, posture, params):
-    """:func:`_brake` in a walk's double-support geometry (:data:`STRIDE_STAND_RANGES`)."""
-    return _brake(rng, posture, params, STRIDE_STAND_RANGES)
+    """:func:`_stride_stand`'s posture moving as a walk enters double support.
+
+    The hip forward (:data:`BRAKE_HIP_SPEED_RANGE_M_S`) and down
+    (:data:`STRIDE_BRAKE_HIP_VZ_RANGE_M_S`), the rear heel rising
+    (:data:`STRIDE_BRAKE_HEEL_RATE_RANGE_RAD_S`), each uniform (:func:`stand_rates`).
+    """
+    q = _stand_posture(rng, params, STRIDE_STAND_RANGES)
+    ranges = (BRAKE_HIP_SPEED_RANGE_M_S, STRIDE_BRAKE_HIP_VZ_RANGE_M_S,
+              STRIDE_BRAKE_HEEL_RATE_RANGE_RAD_S)  # fmt: skip
+    return q, stand_rates(params, q, *(_uniform(rng, *r) for r in ranges)), _DOUBLE_SUPPORT
 
 
 def _nudge(rng, posture, params):

@@ -127,12 +127,14 @@ def test_brake_start_is_the_stand_moving_within_model_4_in_both_envs():
 
 def test_stride_stand_starts_are_exact_double_supports_in_a_walks_geometry_in_both_envs():
     """``start="stride_stand"`` / ``"stride_brake"``: the stand and brake starts drawn from the
-    walk's double-support ranges (``STRIDE_STAND_*``), at rest / with the hip moving forward,
-    model 4's constraints exact."""
+    walk's double-support ranges (``STRIDE_STAND_*``), at rest / with the hip moving forward and
+    down and the rear heel rising (``STRIDE_BRAKE_*``), model 4's constraints exact."""
     from biped_constraint_env.kinematics import point_velocity
     from biped_constraint_env.model import SC_TOE5
     from biped_constraint_env.starts import (
         BRAKE_HIP_SPEED_RANGE_M_S,
+        STRIDE_BRAKE_HEEL_RATE_RANGE_RAD_S,
+        STRIDE_BRAKE_HIP_VZ_RANGE_M_S,
         STRIDE_STAND_HEEL_UP_RANGE_RAD,
         STRIDE_STAND_HIP_Y_RANGE_M,
         STRIDE_STAND_HIP_Z_RANGE_M,
@@ -146,7 +148,7 @@ def test_stride_stand_starts_are_exact_double_supports_in_a_walks_geometry_in_bo
         vobs, _ = venv.reset(seed=11)
         chain = env.params.chain(0)
         toe = float(chain.packed_scalars[SC_TOE5])
-        hips = []
+        hips, rates = [], []
         for i in range(4):
             obs, info = env.reset(seed=11 + i)
             np.testing.assert_array_equal(obs, vobs[i])
@@ -168,9 +170,13 @@ def test_stride_stand_starts_are_exact_double_supports_in_a_walks_geometry_in_bo
                 assert not st.qd.any()
             else:
                 assert BRAKE_HIP_SPEED_RANGE_M_S[0] <= hip_v[0] <= BRAKE_HIP_SPEED_RANGE_M_S[1]
-                assert abs(hip_v[1]) < 1e-12
+                assert STRIDE_BRAKE_HIP_VZ_RANGE_M_S[0] <= hip_v[1] <= 0.0
+                heel_rate = -sum(st.qd)  # the rear foot's absolute rate, turning backward
+                lo, hi = STRIDE_BRAKE_HEEL_RATE_RANGE_RAD_S
+                assert lo <= heel_rate <= hi
+                rates.append((hip_v[1], heel_rate))
             hips.append(kp["hip"][0])
-        assert len(set(hips)) == 4  # drawn per row
+        assert len(set(hips)) == 4 and len(set(rates)) == len(rates)  # drawn per row
 
 
 def _first_step(ctl, env_kw, seed=0, limit_s=5.0):
