@@ -1,6 +1,6 @@
 """A walker and a stander handing over at a stop: each alone and the two gated, development seeds.
 
-python handover.py WALKER WHICH STANDER WHICH V [N] -> stdout.
+python handover.py WALKER WHICH STANDER WHICH V [N] [FORCES] -> stdout.
 
 1. The stander alone at a zero command, 8 s, 20 episodes (seeds 700000+) from each of the
    starts "stand", "brake", "stride_stand" and "stride_brake": how many last 8 s, how many of
@@ -10,6 +10,11 @@ python handover.py WALKER WHICH STANDER WHICH V [N] -> stdout.
    observation's ``hip_vy``) is below V [m/s]; the walker's elsewhere. The command protocol's
    stop and restart rows (``command_protocol.stop_rows``: a walk at 0.3-2.0 m/s, told 0, at rest
    within 3 s and held 5 s, then 1.0 m/s) on N development episodes (default 20).
+3. With FORCES = "start" (not a network: the simulator is asked): the same stop test, single
+   envs, with one change: in the first period the stander acts after the walker, its
+   observation's three contact-force entries are the forces at that state under zero torque,
+   as at every start it trained from (elsewhere they are the forces under the last period's
+   torques, here the walker's).
 
 A check of what a gate read from the observation could hand over, not a trained network.
 """
@@ -22,11 +27,51 @@ import torch
 
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.observation import OBS_NAMES
+from biped_constraint_env.simulator import evaluate
 from training.evaluation import command_protocol as cp
 from training.ppo.policy_io import load_policy, policy_actor, policy_batch_actor
 
 torch.set_num_threads(1)
 MODE_4, HIP_VY, COMMAND = OBS_NAMES.index("mode_4"), OBS_NAMES.index("hip_vy"), -1
+FORCES = slice(OBS_NAMES.index("f_stance_toe"), OBS_NAMES.index("f_contact_normal") + 1)
+
+
+def stop_with_start_forces(walk, stand, cfg, v, seeds):
+    """Check 3: (successes, a line per episode), the stander's first forces as at a start."""
+    commands = np.random.default_rng(int(seeds[0])).uniform(0.3, 2.0, len(seeds))  # stop_rows'
+    wins, rows = 0, []
+    for seed, c in zip(seeds, commands, strict=True):
+        env = gym.make(cfg.env_id, **cfg.env_kwargs())
+        u = env.unwrapped
+        obs, info = env.reset(seed=seed, options={"command": float(c)})
+        gated, t, speeds, modes, done = False, [], [], [], False
+        while info["t"] < cp.STOP_AT_S + cp.STOP_WITHIN_S + cp.HOLD_S and not done:
+            if info["t"] >= cp.STOP_AT_S and info["command_m_s"] != 0.0:
+                u.set_command(0.0)
+                obs = obs.copy()
+                obs[COMMAND] = 0.0
+            if obs[COMMAND] == 0.0 and obs[MODE_4] == 1.0 and obs[HIP_VY] < v:
+                if not gated:
+                    obs = obs.copy()
+                    obs[FORCES] = evaluate(u.params, u.state, np.zeros(5), u.options)[1][:3]
+                gated, a = True, stand(obs[None])[0]
+            else:
+                gated, a = False, walk(obs[None])[0]
+            y0, t0 = info["hip_y"], info["t"]
+            obs, _, term, trunc, info = env.step(a)
+            done = term or trunc
+            t.append(info["t"])
+            modes.append(info["mode"])
+            speeds.append((info["hip_y"] - y0) / max(info["t"] - t0, 1e-9))
+        ok, drift = cp.stands(np.array(t), np.array(speeds), cp.STOP_AT_S, info["t"])
+        wins += ok and not done
+        held = [k for k, m in enumerate(modes) if all(x == 4 for x in modes[k:])]
+        since = f"{t[held[0]]:.2f} s" if held else "never"
+        late = np.abs(speeds[-100:]).mean()
+        end = info["termination_reason"] if done else None
+        rows.append(f"{seed} ({c:.2f} m/s): ends {end}, in model 4 to the end from {since},"
+                    f" last 2 s |v| {late:.3f}, drift {drift:.3f}")  # fmt: skip
+    return wins, rows
 
 
 def zero_command_check(act, cfg, start, n=20):
@@ -51,15 +96,23 @@ def main():
     """The two checks of the docstring."""
     walker, wwhich, stander, swhich, v = sys.argv[1:6]
     n, v = int(sys.argv[6]) if len(sys.argv) > 6 else 20, float(v)
+    forces = sys.argv[7] if len(sys.argv) > 7 else ""
     pw, nw, cw, sw = load_policy(walker, wwhich)
     ps, ns, cs, ss = load_policy(stander, swhich)
-    print(f"# walker {walker} {wwhich}/ ({sw['num_timesteps']} env steps), stander {stander}"
-          f" {swhich}/ ({ss['num_timesteps']}), gate: command 0, model 4, hip_vy < {v} m/s")  # fmt: skip
+    print(
+        f"# walker {walker} {wwhich}/ ({sw['num_timesteps']} env steps), stander {stander}"
+        f" {swhich}/ ({ss['num_timesteps']}); gate: command 0, model 4, hip_vy < {v} m/s"
+    )
+    walk, stand = policy_batch_actor(pw, nw, cw), policy_batch_actor(ps, ns, cs)
+    if forces == "start":
+        wins, rows = stop_with_start_forces(walk, stand, cw, v, list(range(700000, 700000 + n)))
+        print(f"gated, the stander's first forces as at a start: stop {wins} of {n}")
+        print("\n".join(rows))
+        return
     one = policy_actor(ps, ns, cs)
     for start in ("stand", "brake", "stride_stand", "stride_brake"):
         lasted, still, speeds = zero_command_check(one, cw, start)
         print(f"stander from {start}: {lasted} of 20 last 8 s, {still} still; speeds {speeds}")
-    walk, stand = policy_batch_actor(pw, nw, cw), policy_batch_actor(ps, ns, cs)
 
     def act(obs):
         obs = np.asarray(obs)
