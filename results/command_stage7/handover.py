@@ -10,11 +10,12 @@ python handover.py WALKER WHICH STANDER WHICH V [N] [FORCES] -> stdout.
    observation's ``hip_vy``) is below V [m/s]; the walker's elsewhere. The command protocol's
    stop and restart rows (``command_protocol.stop_rows``: a walk at 0.3-2.0 m/s, told 0, at rest
    within 3 s and held 5 s, then 1.0 m/s) on N development episodes (default 20).
-3. With FORCES = "start" (not a network: the simulator is asked): the same stop test, single
-   envs, with one change: in the first period the stander acts after the walker, its
-   observation's three contact-force entries are the forces at that state under zero torque,
-   as at every start it trained from (elsewhere they are the forces under the last period's
-   torques, here the walker's).
+3. With FORCES (not a network): the same stop test, single envs, with one change to the
+   stander's observation's three contact-force entries (after a period: the forces under that
+   period's torques, at the handover the walker's): "start": in its first period after the
+   walker, the forces at that state under zero torque, as at every start it trained from (the
+   simulator is asked); "mean": in that first period, the stander's observation mean (its
+   normalised input 0); "mean_always": the mean in every period it acts.
 
 A check of what a gate read from the observation could hand over, not a trained network.
 """
@@ -36,8 +37,8 @@ MODE_4, HIP_VY, COMMAND = OBS_NAMES.index("mode_4"), OBS_NAMES.index("hip_vy"), 
 FORCES = slice(OBS_NAMES.index("f_stance_toe"), OBS_NAMES.index("f_contact_normal") + 1)
 
 
-def stop_with_start_forces(walk, stand, cfg, v, seeds):
-    """Check 3: (successes, a line per episode), the stander's first forces as at a start."""
+def stop_with_forces(walk, stand, cfg, v, seeds, how, mean):
+    """Check 3: (successes, a line per episode); ``how``: FORCES; ``mean``: the stander's."""
     commands = np.random.default_rng(int(seeds[0])).uniform(0.3, 2.0, len(seeds))  # stop_rows'
     wins, rows = 0, []
     for seed, c in zip(seeds, commands, strict=True):
@@ -51,9 +52,10 @@ def stop_with_start_forces(walk, stand, cfg, v, seeds):
                 obs = obs.copy()
                 obs[COMMAND] = 0.0
             if obs[COMMAND] == 0.0 and obs[MODE_4] == 1.0 and obs[HIP_VY] < v:
-                if not gated:
+                if not gated or how == "mean_always":
                     obs = obs.copy()
-                    obs[FORCES] = evaluate(u.params, u.state, np.zeros(5), u.options)[1][:3]
+                    obs[FORCES] = (evaluate(u.params, u.state, np.zeros(5), u.options)[1][:3]
+                                   if how == "start" else mean)  # fmt: skip
                 gated, a = True, stand(obs[None])[0]
             else:
                 gated, a = False, walk(obs[None])[0]
@@ -104,9 +106,13 @@ def main():
         f" {swhich}/ ({ss['num_timesteps']}); gate: command 0, model 4, hip_vy < {v} m/s"
     )
     walk, stand = policy_batch_actor(pw, nw, cw), policy_batch_actor(ps, ns, cs)
-    if forces == "start":
-        wins, rows = stop_with_start_forces(walk, stand, cw, v, list(range(700000, 700000 + n)))
-        print(f"gated, the stander's first forces as at a start: stop {wins} of {n}")
+    if forces:
+        if forces not in ("start", "mean", "mean_always"):
+            raise SystemExit(f"FORCES is start, mean or mean_always, not {forces!r}")
+        mean = np.asarray(ns.mean)[FORCES]
+        seeds = list(range(700000, 700000 + n))
+        wins, rows = stop_with_forces(walk, stand, cw, v, seeds, forces, mean)
+        print(f"gated, the stander's force entries {forces}: stop {wins} of {n}")
         print("\n".join(rows))
         return
     one = policy_actor(ps, ns, cs)
