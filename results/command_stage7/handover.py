@@ -37,6 +37,11 @@ MODE_4, HIP_VY, COMMAND = OBS_NAMES.index("mode_4"), OBS_NAMES.index("hip_vy"), 
 FORCES = slice(OBS_NAMES.index("f_stance_toe"), OBS_NAMES.index("f_contact_normal") + 1)
 
 
+def stander_rows(obs, v):
+    """(n,) bool: the rows of ``obs`` (n, d) the stander acts on (the docstring's gate)."""
+    return (obs[:, COMMAND] == 0.0) & (obs[:, MODE_4] == 1.0) & (obs[:, HIP_VY] < v)
+
+
 def stop_with_forces(walk, stand, cfg, v, seeds, how, mean):
     """Check 3: (successes, a line per episode); ``how``: FORCES; ``mean``: the stander's."""
     commands = np.random.default_rng(int(seeds[0])).uniform(0.3, 2.0, len(seeds))  # stop_rows'
@@ -51,7 +56,7 @@ def stop_with_forces(walk, stand, cfg, v, seeds, how, mean):
                 u.set_command(0.0)
                 obs = obs.copy()
                 obs[COMMAND] = 0.0
-            if obs[COMMAND] == 0.0 and obs[MODE_4] == 1.0 and obs[HIP_VY] < v:
+            if stander_rows(obs[None], v)[0]:
                 if not gated or how == "mean_always":
                     obs = obs.copy()
                     obs[FORCES] = (evaluate(u.params, u.state, np.zeros(5), u.options)[1][:3]
@@ -122,7 +127,7 @@ def main():
 
     def act(obs):
         obs = np.asarray(obs)
-        gate = (obs[:, COMMAND] == 0.0) & (obs[:, MODE_4] == 1.0) & (obs[:, HIP_VY] < v)
+        gate = stander_rows(obs, v)
         return np.where(gate[:, None], stand(obs), walk(obs))
 
     for row in cp.stop_rows(act, cw.env_kwargs(), list(range(700000, 700000 + n)), cw.env_id):
