@@ -294,12 +294,12 @@ def _stand(rng, posture, params, ranges=STAND_RANGES):
     return _stand_posture(rng, params, ranges), np.zeros(N_LINKS), _DOUBLE_SUPPORT
 
 
-def _brake(rng, posture, params, ranges=STAND_RANGES):
+def _brake(rng, posture, params):
     """The standing start's draw moving, its hip forward (:func:`stand_rates`).
 
     The speed uniform in :data:`BRAKE_HIP_SPEED_RANGE_M_S`: the states a walk stops from.
     """
-    q = _stand_posture(rng, params, ranges)
+    q = _stand_posture(rng, params)
     return q, stand_rates(params, q, _uniform(rng, *BRAKE_HIP_SPEED_RANGE_M_S)), _DOUBLE_SUPPORT
 
 
