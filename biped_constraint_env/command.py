@@ -1,13 +1,17 @@
 """The command task: a commanded forward speed, observed, resampled, and the reward that follows it.
 
-``command={"range": (lo, hi), "zero_fraction": p, "resample_s": (lo, hi)}`` (``task="command"``
-sets it: 0-2 m/s, 10% zero, a new command every 1-5 s): each row holds a commanded forward speed
-[m/s], drawn at its start (zero with probability ``zero_fraction``, else uniform in ``range``)
-and again every U(``resample_s``) seconds of simulated time (``resample_s=None``: one command
-per episode), from the row's own generator, after the start's and the perturbations' draws.
-The observation appends it (one entry, ``command_m_s``). A user sets it as a joystick would:
-``env.unwrapped.set_command(v)`` (the batched env: one value per row), or
-``reset(options={"command": v})``; a command set so holds until the next reset (no resampling).
+``command={"range": (lo, hi), "zero_fraction": p, "resample_s": (lo, hi), "deadband": d}``
+(``task="command"`` sets it: 0-2 m/s, 10% zero, a new command every 1-5 s, no deadband): each
+row holds a commanded forward speed [m/s], drawn at its start (zero with probability
+``zero_fraction``, else uniform in ``range``) and again every U(``resample_s``) seconds of
+simulated time (``resample_s=None``: one command per episode), from the row's own generator,
+after the start's and the perturbations' draws. The observation appends it (one entry,
+``command_m_s``). A user sets it as a joystick would: ``env.unwrapped.set_command(v)`` (the
+batched env: one value per row), or ``reset(options={"command": v})``; a command set so holds
+until the next reset (no resampling). ``deadband`` [m/s] (0: off) is a joystick's dead zone:
+every command, drawn or set, of size below it is held as exactly 0 (stop and stand), so the
+observation, the reward and ``info["command_m_s"]`` see the 0 (legged_gym zeroes its drawn
+commands below 0.2 m/s the same way).
 
 The reward (``reward="command"``) has no recorded motion: the terms of the gait reward
 (:mod:`.gait`) with the command in place of its constant speed target, and a contact clock that
@@ -59,7 +63,7 @@ from .validation import check_mapping, check_real
 
 MAX_COMMAND_M_S = 5.0
 """Largest commanded speed accepted [m/s] (either way)."""
-COMMAND_KEYS = ("range", "zero_fraction", "resample_s")
+COMMAND_KEYS = ("range", "zero_fraction", "resample_s", "deadband")
 """Keys of the ``command`` dict."""
 COMMAND_OBS_LOW = np.array([-MAX_COMMAND_M_S])
 COMMAND_OBS_HIGH = np.array([MAX_COMMAND_M_S])
@@ -75,6 +79,11 @@ class CommandSettings:
     range: tuple[float, float] = (0.0, 2.0)
     zero_fraction: float = 0.1
     resample_s: tuple[float, float] | None = (1.0, 5.0)
+    deadband: float = 0.0
+
+    def held(self, v: float) -> float:
+        """The command held for a drawn or set ``v`` [m/s]: 0 inside the deadband."""
+        return 0.0 if abs(v) < self.deadband else v
 
 
 def _pair(name: str, value: Any, lo: float, hi: float, unit: str) -> tuple[float, float]:
@@ -102,6 +111,8 @@ def command_settings(spec: Any) -> CommandSettings | None:
         zero_fraction=check_real("command zero_fraction", spec.get("zero_fraction",
                                                                    d.zero_fraction), 0.0, 1.0),
         resample_s=None if resample is None else _pair("resample_s", resample, 0.02, 1e4, " [s]"),
+        deadband=check_real("command deadband", spec.get("deadband", d.deadband), 0.0,
+                            MAX_COMMAND_M_S, unit=" [m/s]"),
     )  # fmt: skip
 
 
@@ -135,7 +146,7 @@ class Commands:
         if rng.random() < s.zero_fraction:
             return 0.0
         lo, hi = s.range
-        return lo if lo == hi else float(rng.uniform(lo, hi))
+        return s.held(lo if lo == hi else float(rng.uniform(lo, hi)))
 
     def _next(self, rng, t: float) -> float:
         if self.s.resample_s is None:
@@ -153,14 +164,18 @@ class Commands:
                 self.v[i] = self._draw(rngs[k])
                 self.next_t[i] = self._next(rngs[k], float(t[k]))
             else:
-                self.v[i], self.next_t[i] = given, np.inf
+                self.v[i], self.next_t[i] = self.s.held(given), np.inf
 
-    def set(self, values, rows=None) -> None:
-        """Set the commands of ``rows`` (default all) [m/s]; they hold until the next reset."""
+    def set(self, values, rows=None) -> np.ndarray:
+        """Set the commands of ``rows`` (default all) [m/s]; they hold until the next reset.
+
+        Returns the rows' held commands (0 inside the deadband).
+        """
         rows = np.arange(self.v.shape[0]) if rows is None else np.asarray(rows)
         vals = np.broadcast_to(np.asarray(values, dtype=np.float64), rows.shape)
-        self.v[rows] = [check_command(float(x)) for x in vals]
+        self.v[rows] = [self.s.held(check_command(float(x))) for x in vals]
         self.next_t[rows] = np.inf
+        return self.v[rows].copy()
 
     def before_period(self, t: np.ndarray, rngs, rows) -> None:
         """Resample the commands due at the rows' times ``t`` (n,), each from its generator."""

@@ -222,8 +222,9 @@ class ConstrainedBipedEnv(gym.Env):
     | | | per episode from (lo, hi), gravity turned by it in the ground's frame) |
     | command | None | dict: the commanded forward speed [m/s] (one more observation entry, |
     | | | ``info["command_m_s"]``): "range" (lo, hi), "zero_fraction", "resample_s" (lo, hi) |
-    | | | or None (held); ``task="command"``: (0, 2), 0.1, (1, 5); ``set_command(v)``, |
-    | | | ``reset(options={"command": v})``; needs ``reward="command"`` (:mod:`.command`) |
+    | | | or None (held), "deadband" (commands below it held as 0) [m/s]; ``task="command"``: |
+    | | | (0, 2), 0.1, (1, 5), 0; ``set_command(v)``, ``reset(options={"command": v})``; |
+    | | | needs ``reward="command"`` (:mod:`.command`) |
     | reference | None | the reference walk: "midstride", "rest", "own" (each start its own kind's |
     | | | recording) or an npz path (None: the start's own; "own" if mixed) |
     | render_mode | None | "rgb_array" or "human" |
@@ -453,14 +454,15 @@ class ConstrainedBipedEnv(gym.Env):
         """
         self.settings = self.core.set_start_kind(start)
 
-    def set_command(self, v: float) -> None:
+    def set_command(self, v: float) -> float:
         """Set the commanded forward speed [m/s], as a joystick would (``task="command"``).
 
         It holds until the next reset (no resampling); the next observation carries it.
+        Returns the held command: 0 if ``v`` is inside the command's deadband.
         """
         if self.core.commands is None:
             raise ValueError("set_command needs an env with a command (task='command')")
-        self.core.commands.set(v)
+        return float(self.core.commands.set(v)[0])
 
     def render(self):
         """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""

@@ -108,18 +108,20 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         """Every row's next starts from ``start``, as :meth:`.ConstrainedBipedEnv.set_start`."""
         self.settings = self.core.set_start_kind(start)
 
-    def set_command(self, values) -> None:
+    def set_command(self, values) -> np.ndarray:
         """Set the commanded forward speeds [m/s]: one value for all rows or one per row.
 
         They hold until each row's next reset (an automatic reset draws a new command);
-        the next observation carries them. ValueError without a command (``task="command"``).
+        the next observation carries them. Returns the held commands (num_envs,): 0 where a
+        value is inside the command's deadband. ValueError without a command
+        (``task="command"``).
         """
         if self.core.commands is None:
             raise ValueError("set_command needs an env with a command (task='command')")
         vals = np.asarray(values, dtype=np.float64)
         if vals.shape not in ((), (self.num_envs,)):
             raise ValueError(f"set_command takes one value or {self.num_envs}, got {vals.shape}")
-        self.core.commands.set(vals)
+        return self.core.commands.set(vals)
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-environment; ``seed`` s seeds sub-environment i with s + i."""

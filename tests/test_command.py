@@ -52,6 +52,43 @@ def test_zero_commands_come_with_the_zero_fraction():
     assert np.all(np.isinf(c.next_t))  # resample_s=None: one command per episode
 
 
+def test_the_deadband_holds_small_commands_as_zero_drawn_set_and_given_in_both_envs():
+    c = Commands(2000, CommandSettings(range=(0.0, 1.0), zero_fraction=0.0, resample_s=None,
+                                       deadband=0.2))  # fmt: skip
+    rngs = [np.random.default_rng(s) for s in range(2000)]
+    c.start(np.arange(2000), rngs, np.zeros(2000))
+    assert not np.any((c.v > 0.0) & (c.v < 0.2)) and 0.15 < (c.v == 0.0).mean() < 0.25
+    assert c.v.max() > 0.9  # only the band is zeroed
+    kw = {**KW, "command": {**KW["command"], "deadband": 0.2}}
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    obs, info = env.reset(seed=0, options={"command": 0.15})
+    assert obs[-1] == 0.0 == info["command_m_s"]
+    assert env.unwrapped.set_command(-0.19) == 0.0
+    assert env.step(np.zeros(5))[0][-1] == 0.0
+    assert env.unwrapped.set_command(0.2) == 0.2  # the band's edge is a command
+    assert env.step(np.zeros(5))[0][-1] == 0.2
+    venv = _vec(2, **kw)
+    venv.reset(seed=0)
+    assert venv.unwrapped.set_command([0.1, 0.3]).tolist() == [0.0, 0.3]
+    assert venv.step(np.zeros((2, 5)))[0][:, -1].tolist() == [0.0, 0.3]
+    # drawn commands: the single and the batched env hold the same, none inside the band
+    single = gym.make("ConstrainedBiped-v0", **kw)
+    obs_v, _ = venv.reset(seed=40)
+    for row in range(2):
+        assert single.reset(seed=40 + row)[0][-1] == obs_v[row, -1]
+    seen = []
+    for seed in range(3):
+        single.reset(seed=seed)
+        for _ in range(30):  # 0.6 s: several resamplings
+            obs, _, term, trunc, _ = single.step(np.zeros(5))
+            seen.append(obs[-1])
+            if term or trunc:
+                break
+    assert len(set(seen)) > 3 and not any(0.0 < abs(v) < 0.2 for v in seen)
+    with pytest.raises(ValueError, match="deadband"):
+        gym.make("ConstrainedBiped-v0", **{**KW, "command": {"deadband": -0.1}})
+
+
 def test_a_user_sets_the_command_as_a_joystick_and_it_holds():
     kw = {**KW, "command": {**KW["command"], "resample_s": (0.05, 0.1)}}
     env = gym.make("ConstrainedBiped-v0", **kw)

@@ -82,11 +82,11 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
     k = 0
     while live.any():
         v = np.asarray(command(info["t"], k), dtype=float)
-        venv.unwrapped.set_command(v)
+        held = venv.unwrapped.set_command(v)  # 0 inside the command's deadband
         if hook is not None:
             hook(venv.unwrapped.core, live, step_t)
         obs = obs.copy()
-        obs[:, -1] = v  # the command's entry (the observation's last) as the env now gives it
+        obs[:, -1] = held  # the command's entry (the observation's last) as the env now gives it
         tau = np.asarray(act(obs), dtype=np.float64)
         tau[~live] = 0.0
         obs, _, term, trunc, info = venv.step(tau)
