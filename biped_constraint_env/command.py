@@ -1,7 +1,8 @@
 """The command task: a commanded forward speed, observed, resampled, and the reward that follows it.
 
-``command={"range": (lo, hi), "zero_fraction": p, "resample_s": (lo, hi), "deadband": d}``
-(``task="command"`` sets it: 0-2 m/s, 10% zero, a new command every 1-5 s, no deadband): each
+``command={"range": (lo, hi), "zero_fraction": p, "resample_s": (lo, hi), "deadband": d,
+"ramp_m_s2": a}`` (``task="command"`` sets it: 0-2 m/s, 10% zero, a new command every 1-5 s, no
+deadband, no ramp): each
 row holds a commanded forward speed [m/s], drawn at its start (zero with probability
 ``zero_fraction``, else uniform in ``range``) and again every U(``resample_s``) seconds of
 simulated time (``resample_s=None``: one command per episode), from the row's own generator,
@@ -11,7 +12,11 @@ batched env: one value per row), or ``reset(options={"command": v})``; a command
 until the next reset (no resampling). ``deadband`` [m/s] (0: off) is a joystick's dead zone:
 every command, drawn or set, of size below it is held as exactly 0 (stop and stand), so the
 observation, the reward and ``info["command_m_s"]`` see the 0 (legged_gym zeroes its drawn
-commands below 0.2 m/s the same way).
+commands below 0.2 m/s the same way). ``ramp_m_s2`` [m/s^2] (None: off) is a joystick's rate
+limit: the held command moves toward a newly drawn or set one at this rate, a step before each
+control period by the rate times the time since the last (a new episode starts at its command);
+a stop from 2 m/s at 1.5 m/s^2 reaches 0 in 1.33 s (with a deadband of 0.2 m/s: 1.2 s), which
+counts within the stop's time.
 
 The reward (``reward="command"``) has no recorded motion: the terms of the gait reward
 (:mod:`.gait`) with the command in place of its constant speed target, and a contact clock that
@@ -63,7 +68,7 @@ from .validation import check_mapping, check_real
 
 MAX_COMMAND_M_S = 5.0
 """Largest commanded speed accepted [m/s] (either way)."""
-COMMAND_KEYS = ("range", "zero_fraction", "resample_s", "deadband")
+COMMAND_KEYS = ("range", "zero_fraction", "resample_s", "deadband", "ramp_m_s2")
 """Keys of the ``command`` dict."""
 COMMAND_OBS_LOW = np.array([-MAX_COMMAND_M_S])
 COMMAND_OBS_HIGH = np.array([MAX_COMMAND_M_S])
@@ -80,6 +85,7 @@ class CommandSettings:
     zero_fraction: float = 0.1
     resample_s: tuple[float, float] | None = (1.0, 5.0)
     deadband: float = 0.0
+    ramp_m_s2: float | None = None
 
     def held(self, v: float) -> float:
         """The command held for a drawn or set ``v`` [m/s]: 0 inside the deadband."""
@@ -105,6 +111,7 @@ def command_settings(spec: Any) -> CommandSettings | None:
     check_mapping("command", spec, COMMAND_KEYS)
     d = CommandSettings()
     resample = spec.get("resample_s", d.resample_s)
+    ramp = spec.get("ramp_m_s2", d.ramp_m_s2)
     return CommandSettings(
         range=_pair("range", spec.get("range", d.range), -MAX_COMMAND_M_S, MAX_COMMAND_M_S,
                     " [m/s]"),  # fmt: skip
@@ -113,6 +120,8 @@ def command_settings(spec: Any) -> CommandSettings | None:
         resample_s=None if resample is None else _pair("resample_s", resample, 0.02, 1e4, " [s]"),
         deadband=check_real("command deadband", spec.get("deadband", d.deadband), 0.0,
                             MAX_COMMAND_M_S, unit=" [m/s]"),
+        ramp_m_s2=None if ramp is None else check_real("command ramp_m_s2", ramp, 0.01, 1e3,
+                                                       unit=" [m/s^2]"),
     )  # fmt: skip
 
 
@@ -133,12 +142,20 @@ def split_reset_options(options: Any) -> tuple[Any, float | None]:
 
 
 class Commands:
-    """The commanded speeds of N rows, their next resampling times and who set them."""
+    """The commanded speeds of N rows, their next resampling times and who set them.
+
+    ``goal``: the drawn or set commands; ``ramped``: where the ramp has brought them (the
+    goals without a ramp); ``v``: the held commands, ``ramped`` with the deadband applied
+    (what the observation, the reward and ``info`` see).
+    """
 
     def __init__(self, n: int, settings: CommandSettings):
         """Commands of ``n`` rows, drawn as ``settings`` says."""
         self.s = settings
         self.v = np.zeros(n)
+        self.goal = np.zeros(n)
+        self.ramped = np.zeros(n)
+        self.t_last = np.zeros(n)
         self.next_t = np.full(n, np.inf)
 
     def _draw(self, rng) -> float:
@@ -146,7 +163,12 @@ class Commands:
         if rng.random() < s.zero_fraction:
             return 0.0
         lo, hi = s.range
-        return s.held(lo if lo == hi else float(rng.uniform(lo, hi)))
+        return lo if lo == hi else float(rng.uniform(lo, hi))
+
+    def _hold(self, rows) -> None:
+        """The held commands of ``rows`` from their ramped ones (the deadband)."""
+        r = self.ramped[rows]
+        self.v[rows] = np.where(np.abs(r) < self.s.deadband, 0.0, r)
 
     def _next(self, rng, t: float) -> float:
         if self.s.resample_s is None:
@@ -159,12 +181,16 @@ class Commands:
 
         ``given``: the command of ``reset(options={"command": v})``, held (nothing drawn).
         """
-        for k, i in enumerate(np.asarray(idx)):
+        idx = np.asarray(idx)
+        for k, i in enumerate(idx):
             if given is None:
-                self.v[i] = self._draw(rngs[k])
+                self.goal[i] = self._draw(rngs[k])
                 self.next_t[i] = self._next(rngs[k], float(t[k]))
             else:
-                self.v[i], self.next_t[i] = self.s.held(given), np.inf
+                self.goal[i], self.next_t[i] = given, np.inf
+            self.t_last[i] = float(t[k])
+        self.ramped[idx] = self.goal[idx]
+        self._hold(idx)
 
     def set(self, values, rows=None) -> np.ndarray:
         """Set the commands of ``rows`` (default all) [m/s]; they hold until the next reset.
@@ -173,16 +199,32 @@ class Commands:
         """
         rows = np.arange(self.v.shape[0]) if rows is None else np.asarray(rows)
         vals = np.broadcast_to(np.asarray(values, dtype=np.float64), rows.shape)
-        self.v[rows] = [self.s.held(check_command(float(x))) for x in vals]
+        self.goal[rows] = [check_command(float(x)) for x in vals]
         self.next_t[rows] = np.inf
+        if self.s.ramp_m_s2 is None:
+            self.ramped[rows] = self.goal[rows]
+            self._hold(rows)
         return self.v[rows].copy()
 
     def before_period(self, t: np.ndarray, rngs, rows) -> None:
-        """Resample the commands due at the rows' times ``t`` (n,), each from its generator."""
+        """The commands of ``rows`` at their times ``t`` (n,) before a period.
+
+        Those due are resampled, each from its row's generator; then the ramp's step.
+        """
+        rows = np.asarray(rows)
         for i in rows:
             if t[i] + 1e-12 >= self.next_t[i]:
-                self.v[i] = self._draw(rngs[i])
+                self.goal[i] = self._draw(rngs[i])
                 self.next_t[i] = self._next(rngs[i], float(t[i]))
+        if self.s.ramp_m_s2 is None:
+            self.ramped[rows] = self.goal[rows]
+        else:
+            step = self.s.ramp_m_s2 * np.maximum(t[rows] - self.t_last[rows], 0.0)
+            gap = self.goal[rows] - self.ramped[rows]
+            self.ramped[rows] = np.where(np.abs(gap) <= step, self.goal[rows],
+                                         self.ramped[rows] + np.sign(gap) * step)  # fmt: skip
+            self.t_last[rows] = t[rows]
+        self._hold(rows)
 
     def features(self) -> np.ndarray:
         """(n, 1): the commanded speeds [m/s] (the observation's last entry)."""

@@ -222,9 +222,10 @@ class ConstrainedBipedEnv(gym.Env):
     | | | per episode from (lo, hi), gravity turned by it in the ground's frame) |
     | command | None | dict: the commanded forward speed [m/s] (one more observation entry, |
     | | | ``info["command_m_s"]``): "range" (lo, hi), "zero_fraction", "resample_s" (lo, hi) |
-    | | | or None (held), "deadband" (commands below it held as 0) [m/s]; ``task="command"``: |
-    | | | (0, 2), 0.1, (1, 5), 0; ``set_command(v)``, ``reset(options={"command": v})``; |
-    | | | needs ``reward="command"`` (:mod:`.command`) |
+    | | | or None (held), "deadband" (commands below it held as 0) [m/s], "ramp_m_s2" (the |
+    | | | held command's rate limit; None: off); ``task="command"``: (0, 2), 0.1, (1, 5), 0, |
+    | | | None; ``set_command(v)``, ``reset(options={"command": v})``; needs |
+    | | | ``reward="command"`` (:mod:`.command`) |
     | reference | None | the reference walk: "midstride", "rest", "own" (each start its own kind's |
     | | | recording) or an npz path (None: the start's own; "own" if mixed) |
     | render_mode | None | "rgb_array" or "human" |

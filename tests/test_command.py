@@ -89,6 +89,43 @@ def test_the_deadband_holds_small_commands_as_zero_drawn_set_and_given_in_both_e
         gym.make("ConstrainedBiped-v0", **{**KW, "command": {"deadband": -0.1}})
 
 
+def test_the_ramp_moves_the_held_command_at_its_rate_and_the_deadband_zeroes_its_tail():
+    s = CommandSettings(range=(2.0, 2.0), zero_fraction=0.0, resample_s=None, deadband=0.25,
+                        ramp_m_s2=1.5)  # fmt: skip
+    c = Commands(2, s)
+    rows = np.arange(2)
+    c.start(rows, [np.random.default_rng(0)] * 2, np.zeros(2))
+    assert c.v.tolist() == [2.0, 2.0]  # an episode starts at its command: no ramp
+    assert c.set([0.0, 1.0]).tolist() == [2.0, 2.0]  # held until the periods ramp them
+    held, t = [], 0.0
+    for _ in range(100):
+        t += 0.02
+        c.before_period(np.full(2, t), None, rows)
+        held.append(c.v.copy())
+    held = np.array(held)
+    # 2.0 - 1.5 * 0.02 k until it passes the band's edge (0.25 m/s: after 58 periods), then 0
+    k = np.arange(1, 101)
+    ramp = np.maximum(2.0 - 1.5 * 0.02 * k, 0.0)
+    assert held[:, 0] == pytest.approx(np.where(ramp < 0.25, 0.0, ramp), abs=1e-12)
+    assert held[:, 1] == pytest.approx(np.maximum(ramp, 1.0), abs=1e-12)
+    assert (held[:, 0] == 0.0).sum() == 100 - 58 and held[-1, 1] == 1.0  # exactly reached
+    # the env: set_command ramps the observed command in both envs alike
+    kw = {"task": "command", "command": {"range": (0.0, 2.0), "zero_fraction": 0.0,
+                                         "resample_s": None, "ramp_m_s2": 1.0}}  # fmt: skip
+    env = gym.make("ConstrainedBiped-v0", **kw)
+    env.reset(seed=0, options={"command": 1.0})
+    env.unwrapped.set_command(0.0)
+    single = [env.step(np.zeros(5))[0][-1] for _ in range(3)]
+    venv = _vec(2, **kw)
+    venv.reset(seed=0, options={"command": 1.0})
+    venv.unwrapped.set_command(0.0)
+    batched = [venv.step(np.zeros((2, 5)))[0][:, -1] for _ in range(3)]
+    assert single == pytest.approx([1.0, 0.98, 0.96], abs=1e-9)  # the value at each start
+    assert np.allclose(batched, np.array(single)[:, None], atol=1e-12)
+    with pytest.raises(ValueError, match="ramp_m_s2"):
+        gym.make("ConstrainedBiped-v0", **{**kw, "command": {"ramp_m_s2": 0.0}})
+
+
 def test_a_user_sets_the_command_as_a_joystick_and_it_holds():
     kw = {**KW, "command": {**KW["command"], "resample_s": (0.05, 0.1)}}
     env = gym.make("ConstrainedBiped-v0", **kw)
