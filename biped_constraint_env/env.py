@@ -133,6 +133,9 @@ class ConstrainedBipedEnv(gym.Env):
     behind the front toe at 2.8-2.92 m: where a walk told to stop enters double support, the
     hip over or behind the rear toe; "stride_brake" also with the hip coming down at 0-0.5 m/s
     and the rear heel rising at 0-3 rad/s, as a walk enters double support).
+    ``start="stride_drift"``: the stride-stand posture with the hip moving level at -0.3 to
+    0.1 m/s (``STRIDE_DRIFT_HIP_SPEED_RANGE_M_S``), the rear foot keeping its angle: a stop
+    after a slow walk, which comes to rest and then drifts backward.
     ``start="nudge"``: the rest
     start's posture in model 1 with the stance leg turning about the ankle at a rate uniform in
     ``NUDGE_RATE_RANGE_RAD_S``
@@ -203,8 +206,8 @@ class ConstrainedBipedEnv(gym.Env):
     | start | "midstride" | a start's name (Starting State), a dict of component weights, or |
     | | | a dict: "kind" (either), "posture" (``NOMINAL_POSTURE_RAD``: the rest posture [rad]), |
     | | | "reset_noise_scale" (0.01: noise on q1..q5 [rad]); the components "rest", |
-    | | | "midstride", "stride", "stand", "brake", "stride_stand", "stride_brake", "nudge", |
-    | | | "reference" (recorded reference states) |
+    | | | "midstride", "stride", "stand", "brake", "stride_stand", "stride_brake", |
+    | | | "stride_drift", "nudge", "reference" (recorded reference states) |
     | reward | "env" | "env" (Rewards), "tracking" (a reference walk's; below), "gait" (the task |
     | | | and the contact clock, no recording; below), "command", or {"kind", "weights", |
     | | | "kernels", "targets", "gated", "first_phase_s"}: any term's weight, kernel or |
@@ -354,7 +357,9 @@ class ConstrainedBipedEnv(gym.Env):
       Added: the command reward's ``still`` term (weight 0: off) and
       ``termination["max_stop_s"]`` (reason ``stop_time``).
       Added: the ``"gravity"`` observation block (the direction of gravity in the ground's
-      frame: a slope is observed).
+      frame: a slope is observed). Added: the ``command`` option's ``deadband`` and
+      ``ramp_m_s2`` (both off by default; ``set_command`` returns the held command); the
+      ``"stride_drift"`` start (the stride-stand posture drifting at -0.3 to 0.1 m/s).
 
     Example:
         >>> import gymnasium as gym

@@ -65,6 +65,10 @@ about its toe as a walk enters double support (1-1.8 rad/s there, then up to 5).
 BRAKE_HIP_SPEED_RANGE_M_S = (0.0, 0.8)
 """Range of the hip's forward speed at a braking start [m/s]: the standing start moving, from
 at rest to a little faster than the command walkers walk on at a zero command (0.4-0.8 m/s)."""
+STRIDE_DRIFT_HIP_SPEED_RANGE_M_S = (-0.3, 0.1)
+"""Range of the hip's forward speed at a stride-drift start [m/s]: a stop after a slow walk
+(0.3-0.8 m/s) comes to rest in double support, then drifts backward, faster and faster (the
+command walkers fall back from it 2-6 s after the stop)."""
 NUDGE_RATE_RANGE_RAD_S = (-0.6, 0.2)
 """Range of the stance leg's turning rate about the ankle at a nudge start [rad/s] (< 0:
 forward): from the flat-foot stride start's fastest to a slow turn backward, so that the rest
@@ -321,6 +325,20 @@ def _stride_brake(rng, posture, params):
     return q, stand_rates(params, q, *(_uniform(rng, *r) for r in ranges)), _DOUBLE_SUPPORT
 
 
+def _stride_drift(rng, posture, params):
+    """:func:`_stride_stand`'s posture drifting, mostly backward, as a slow walk's stop does.
+
+    The hip moving level at a speed uniform in :data:`STRIDE_DRIFT_HIP_SPEED_RANGE_M_S`, the
+    rear foot keeping its angle (:func:`stand_rates`).
+    """
+    q = _stand_posture(rng, params, STRIDE_STAND_RANGES)
+    return (
+        q,
+        stand_rates(params, q, _uniform(rng, *STRIDE_DRIFT_HIP_SPEED_RANGE_M_S)),
+        _DOUBLE_SUPPORT,
+    )
+
+
 def _nudge(rng, posture, params):
     """The ``posture`` in model 1, the stance leg turning about the ankle.
 
@@ -336,11 +354,11 @@ def _nudge(rng, posture, params):
 
 START_COMPONENTS = {"rest": _rest, "midstride": _midstride, "stride": _stride, "stand": _stand,
                     "nudge": _nudge, "brake": _brake, "stride_stand": _stride_stand,
-                    "stride_brake": _stride_brake}  # fmt: skip
+                    "stride_brake": _stride_brake, "stride_drift": _stride_drift}  # fmt: skip
 """The start components by name: each draws (q, qd, mode) from a row's generator, the rest
 posture and the robot, before the reset noise. A new start is one entry here (``start`` or a
 mixture ``start={"stride": 0.75, "midstride": 0.25}`` names it)."""
-EXACT_STARTS = frozenset({"stand", "brake", "stride_stand", "stride_brake"})
+EXACT_STARTS = frozenset({"stand", "brake", "stride_stand", "stride_brake", "stride_drift"})
 """Components whose state meets a contact constraint exactly: no reset noise (their draws vary
 them)."""
 

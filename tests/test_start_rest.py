@@ -126,22 +126,24 @@ def test_brake_start_is_the_stand_moving_within_model_4_in_both_envs():
 
 
 def test_stride_stand_starts_are_exact_double_supports_in_a_walks_geometry_in_both_envs():
-    """``start="stride_stand"`` / ``"stride_brake"``: the stand and brake starts drawn from the
-    walk's double-support ranges (``STRIDE_STAND_*``), at rest / with the hip moving forward and
-    down and the rear heel rising (``STRIDE_BRAKE_*``), model 4's constraints exact."""
+    """``start="stride_stand"`` / ``"stride_brake"`` / ``"stride_drift"``: the stand and brake
+    starts drawn from the walk's double-support ranges (``STRIDE_STAND_*``), at rest / with the
+    hip moving forward and down and the rear heel rising (``STRIDE_BRAKE_*``) / with the hip
+    drifting level, mostly backward (``STRIDE_DRIFT_*``), model 4's constraints exact."""
     from biped_constraint_env.kinematics import point_velocity
     from biped_constraint_env.model import SC_TOE5
     from biped_constraint_env.starts import (
         BRAKE_HIP_SPEED_RANGE_M_S,
         STRIDE_BRAKE_HEEL_RATE_RANGE_RAD_S,
         STRIDE_BRAKE_HIP_VZ_RANGE_M_S,
+        STRIDE_DRIFT_HIP_SPEED_RANGE_M_S,
         STRIDE_STAND_HEEL_UP_RANGE_RAD,
         STRIDE_STAND_HIP_Y_RANGE_M,
         STRIDE_STAND_HIP_Z_RANGE_M,
         STRIDE_STAND_TOE_Y_RANGE_M,
     )
 
-    for start in ("stride_stand", "stride_brake"):
+    for start in ("stride_stand", "stride_brake", "stride_drift"):
         env = gym.make("ConstrainedBiped-v0", start=start).unwrapped
         venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
                             start=start)  # fmt: skip
@@ -168,6 +170,11 @@ def test_stride_stand_starts_are_exact_double_supports_in_a_walks_geometry_in_bo
             hip_v = point_velocity(chain, st.q, st.qd, 3, 0.0)
             if start == "stride_stand":
                 assert not st.qd.any()
+            elif start == "stride_drift":  # the hip level, the rear foot keeping its angle
+                lo, hi = STRIDE_DRIFT_HIP_SPEED_RANGE_M_S
+                assert lo <= hip_v[0] <= hi and abs(hip_v[1]) < 1e-12
+                assert abs(sum(st.qd)) < 1e-12
+                rates.append(hip_v[0])
             else:
                 assert BRAKE_HIP_SPEED_RANGE_M_S[0] <= hip_v[0] <= BRAKE_HIP_SPEED_RANGE_M_S[1]
                 assert STRIDE_BRAKE_HIP_VZ_RANGE_M_S[0] <= hip_v[1] <= 0.0
