@@ -87,10 +87,6 @@ class CommandSettings:
     deadband: float = 0.0
     ramp_m_s2: float | None = None
 
-    def held(self, v: float) -> float:
-        """The command held for a drawn or set ``v`` [m/s]: 0 inside the deadband."""
-        return 0.0 if abs(v) < self.deadband else v
-
 
 def _pair(name: str, value: Any, lo: float, hi: float, unit: str) -> tuple[float, float]:
     if isinstance(value, int | float) and not isinstance(value, bool):
@@ -165,10 +161,17 @@ class Commands:
         lo, hi = s.range
         return lo if lo == hi else float(rng.uniform(lo, hi))
 
-    def _hold(self, rows) -> None:
-        """The held commands of ``rows`` from their ramped ones (the deadband)."""
-        r = self.ramped[rows]
-        self.v[rows] = np.where(np.abs(r) < self.s.deadband, 0.0, r)
+    def _follow(self, rows, step=None) -> None:
+        """Bring the ``rows``' ramped commands toward their goals and hold them (the deadband).
+
+        ``step`` [m/s] per row: at most that far; None: all the way.
+        """
+        goal, ramped = self.goal[rows], self.ramped[rows]
+        if step is not None:
+            gap = goal - ramped
+            goal = np.where(np.abs(gap) <= step, goal, ramped + np.sign(gap) * step)
+        self.ramped[rows] = goal
+        self.v[rows] = np.where(np.abs(goal) < self.s.deadband, 0.0, goal)
 
     def _next(self, rng, t: float) -> float:
         if self.s.resample_s is None:
@@ -189,8 +192,7 @@ class Commands:
             else:
                 self.goal[i], self.next_t[i] = given, np.inf
             self.t_last[i] = float(t[k])
-        self.ramped[idx] = self.goal[idx]
-        self._hold(idx)
+        self._follow(idx)
 
     def set(self, values, rows=None) -> np.ndarray:
         """Set the commands of ``rows`` (default all) [m/s]; they hold until the next reset.
@@ -201,9 +203,8 @@ class Commands:
         vals = np.broadcast_to(np.asarray(values, dtype=np.float64), rows.shape)
         self.goal[rows] = [check_command(float(x)) for x in vals]
         self.next_t[rows] = np.inf
-        if self.s.ramp_m_s2 is None:
-            self.ramped[rows] = self.goal[rows]
-            self._hold(rows)
+        if self.s.ramp_m_s2 is None:  # a ramp moves them before each period
+            self._follow(rows)
         return self.v[rows].copy()
 
     def before_period(self, t: np.ndarray, rngs, rows) -> None:
@@ -211,20 +212,17 @@ class Commands:
 
         Those due are resampled, each from its row's generator; then the ramp's step.
         """
-        rows = np.asarray(rows)
-        for i in rows:
-            if t[i] + 1e-12 >= self.next_t[i]:
-                self.goal[i] = self._draw(rngs[i])
-                self.next_t[i] = self._next(rngs[i], float(t[i]))
+        due = [i for i in rows if t[i] + 1e-12 >= self.next_t[i]]
+        for i in due:
+            self.goal[i] = self._draw(rngs[i])
+            self.next_t[i] = self._next(rngs[i], float(t[i]))
         if self.s.ramp_m_s2 is None:
-            self.ramped[rows] = self.goal[rows]
+            if due:
+                self._follow(due)
         else:
-            step = self.s.ramp_m_s2 * np.maximum(t[rows] - self.t_last[rows], 0.0)
-            gap = self.goal[rows] - self.ramped[rows]
-            self.ramped[rows] = np.where(np.abs(gap) <= step, self.goal[rows],
-                                         self.ramped[rows] + np.sign(gap) * step)  # fmt: skip
+            rows = np.asarray(rows)
+            self._follow(rows, self.s.ramp_m_s2 * np.maximum(t[rows] - self.t_last[rows], 0.0))
             self.t_last[rows] = t[rows]
-        self._hold(rows)
 
     def features(self) -> np.ndarray:
         """(n, 1): the commanded speeds [m/s] (the observation's last entry)."""
