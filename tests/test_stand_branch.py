@@ -7,10 +7,17 @@ import numpy as np
 import pytest
 import torch
 from gymnasium import spaces
+from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from training.ppo.config import PPOConfig
-from training.ppo.stand_branch import MODE_ENTRY, StandBranchPolicy, branch_from
+from training.ppo.stand_branch import (
+    MODE_ENTRY,
+    BranchDiscountBuffer,
+    StandBranchPolicy,
+    branch_from,
+    truncation_discount,
+)
 
 COMMAND = {"env": {"task": "command", "action": "torque"}}
 OBS = spaces.Box(-np.inf, np.inf, (27,), np.float32)
@@ -145,6 +152,7 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"stand_branch_from": "x", **COMMAND}, "goes with --stand-branch and --init-from"),
         ({"stand_branch": True, "stand_branch_from": "x", **COMMAND}, "--init-from"),
         ({"stand_branch_frozen": True, **COMMAND}, "goes with --stand-branch"),
+        ({"stand_gamma": 0.99, **COMMAND}, "--stand-gamma goes with --stand-branch"),
         ({"stand_branch": True, "stand_branch_from": "x", "init_from": "y",
           "init_normalizer": "fresh", **COMMAND}, "snapshot"),
     ],
@@ -153,6 +161,70 @@ def test_the_option_is_refused_where_it_means_nothing(kwargs, match):
     with pytest.raises(ValueError, match=match):
         PPOConfig(**kwargs).validate()
     PPOConfig(stand_branch=True, target_kl=0.02, **COMMAND).validate()
+
+
+def _filled_buffer(stand_gamma, gamma=0.9, lam=0.95, seed=0):
+    """A rollout of 4 steps x 3 envs: branch rows where the command is 0 in model 4."""
+    rng = np.random.default_rng(seed)
+    kw = {"gamma": gamma, "gae_lambda": lam, "device": "cpu", "n_envs": 3}
+    buf = (BranchDiscountBuffer(4, OBS, ACT, stand_gamma=stand_gamma, **kw) if stand_gamma
+           else RolloutBuffer(4, OBS, ACT, **kw))  # fmt: skip
+    commands = [[0.0, 0.0, 1.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+    mode4 = [[True, False, True], [True, True, True], [False, True, True], [True, True, False]]
+    starts = [[1, 1, 1], [0, 0, 0], [0, 1, 0], [0, 0, 0]]
+    for step in range(4):
+        obs = _obs(3, commands[step], mode4[step]).numpy()
+        value, log_prob = (torch.as_tensor(rng.normal(size=3)) for _ in range(2))
+        buf.add(obs, rng.normal(size=(3, 5)), rng.normal(size=3), np.array(starts[step]), value,
+                log_prob)  # fmt: skip
+    last_values, dones = torch.as_tensor(rng.normal(size=3)), np.array([False, True, False])
+    buf.compute_returns_and_advantage(last_values, dones)
+    gate = (np.array(commands) == 0) & np.array(mode4)
+    return buf, gate, np.array(starts), last_values.numpy(), dones
+
+
+def test_the_branch_discount_is_sb3s_gae_at_one_discount_and_each_rows_own_otherwise():
+    ours, _, _, _, _ = _filled_buffer(stand_gamma=0.9)
+    sb3, _, _, _, _ = _filled_buffer(stand_gamma=0.0)  # SB3's own buffer, same data
+    np.testing.assert_allclose(ours.advantages, sb3.advantages, rtol=1e-6)
+    np.testing.assert_allclose(ours.returns, sb3.returns, rtol=1e-6)
+    # lambda = 1: the return is the discounted sum, each step discounting what follows by its
+    # own row's factor, bootstrapped at the rollout's end (by hand, not GAE's recursion)
+    buf, gate, starts, last_values, dones = _filled_buffer(stand_gamma=0.99, lam=1.0)
+    assert 0 < gate.sum() < gate.size  # both kinds of rows: the test could fail
+    np.testing.assert_array_equal(buf.step_gammas(), np.where(gate, 0.99, 0.9).astype(np.float32))
+    for env in range(3):
+        ret = last_values[env] * (1.0 - dones[env])
+        for step in reversed(range(4)):
+            if step < 3 and starts[step + 1, env]:
+                ret = 0.0  # the next step began a new episode
+            ret = buf.rewards[step, env] + (0.99 if gate[step, env] else 0.9) * ret
+            assert buf.returns[step, env] == pytest.approx(ret, rel=1e-5)
+    plain, _, _, _, _ = _filled_buffer(stand_gamma=0.9, lam=1.0)
+    assert not np.allclose(plain.returns, buf.returns)
+    with pytest.raises(ValueError, match="stand_gamma"):
+        BranchDiscountBuffer(4, OBS, ACT, stand_gamma=1.5)
+
+
+def test_a_time_limit_on_a_branch_row_bootstraps_at_the_branch_discount():
+    from types import SimpleNamespace
+
+    policy = _policy()
+    last = _obs(4, [0.0, 0.0, 1.0, 0.0], [True, True, True, False]).numpy()  # rows 0, 1 gated
+    terminal = _obs(4, [0.0, 0.0, 0.0, 0.0], [True] * 4).numpy()
+    model = SimpleNamespace(gamma=0.9, _last_obs=last, policy=policy, num_timesteps=0)
+    cb = truncation_discount(0.99)
+    cb.init_callback(model)
+    rewards = np.array([1.0, 2.0, 3.0, 4.0], dtype=np.float32)
+    dones = np.array([True, True, True, True])
+    cut = [True, False, True, True]  # row 1 ended by a fall: no bootstrap at all
+    infos = [{"terminal_observation": terminal[i], "TimeLimit.truncated": cut[i]} for i in range(4)]
+    cb.update_locals({"rewards": rewards, "dones": dones, "infos": infos})
+    assert cb.on_step()
+    with torch.no_grad():
+        v0 = float(policy.predict_values(torch.as_tensor(terminal[:1]))[0, 0])
+    want = [1.0 + 0.09 * v0, 2.0, 3.0, 4.0]  # only the gated, time-limited row moves
+    np.testing.assert_allclose(rewards, want, rtol=1e-5)
 
 
 def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_path):
@@ -171,14 +243,14 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     tiny = ["--learning-rate", "1e-12"]
     rc = train_ppo.main([*flags, *tiny, "--out-dir", str(tmp_path / "b"), "--init-from",
                          str(walker), "--stand-branch", "--stand-branch-from",
-                         str(stander)])  # fmt: skip
+                         str(stander), "--stand-gamma", "0.99"])  # fmt: skip
     assert rc == 0
     (run,) = (tmp_path / "b" / "train_ppo").iterdir()
     record = json.loads((run / "init_from.json").read_text())
     assert record["stand_branch_from"]["policy"] == str(stander)
     assert len(record["stand_branch_from"]["policy_sha256"]) == 64
     policy, norm, cfg, _ = load_policy(run, "final")
-    assert isinstance(policy, StandBranchPolicy) and cfg.stand_branch
+    assert isinstance(policy, StandBranchPolicy) and cfg.stand_branch and cfg.stand_gamma == 0.99
     assert norm.mean[-1] == 0.0 and norm.var[-1] == 1.0  # the gate reads the command in m/s
     # rows at a zero command in model 4 act as the stander, the others as the walker
     # the branch is the stander's actor behind the map from the walker's normalised input to

@@ -13,7 +13,9 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
     With ``stand_std_nm`` the policy is :class:`training.ppo.exploration.StandNoisePolicy`
     (the same weights as ``MlpPolicy``; a fixed noise on the rows commanded to stand); with
-    ``stand_branch``, :class:`training.ppo.stand_branch.StandBranchPolicy`.
+    ``stand_branch``, :class:`training.ppo.stand_branch.StandBranchPolicy` (with
+    ``stand_gamma``, its rows' own discount:
+    :class:`training.ppo.stand_branch.BranchDiscountBuffer`).
     """
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import LinearSchedule
@@ -34,6 +36,11 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
 
         policy = StandBranchPolicy
     extra = {"normalize_advantage": False} if cfg.stand_balance else {}  # the callback does it
+    if cfg.stand_gamma > 0:
+        from training.ppo.stand_branch import BranchDiscountBuffer
+
+        extra["rollout_buffer_class"] = BranchDiscountBuffer
+        extra["rollout_buffer_kwargs"] = {"stand_gamma": cfg.stand_gamma}
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)

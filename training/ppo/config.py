@@ -128,6 +128,8 @@ class PPOConfig:
     # observation statistics then stay the start's (the returns' still move)
     stand_branch_frozen: bool = False  # with stand_branch: the branch's actor does not learn
     # (its critic does): a stage in which only the walker learns to hand over to it
+    stand_gamma: float = 0.0  # > 0, with stand_branch: the discount of the rows the branch acts
+    # on (the walker's stay gamma): a stander that sees a slow drift's fall seconds ahead
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)
@@ -208,6 +210,8 @@ class PPOConfig:
             raise ValueError("--stand-branch-from goes with --stand-branch and --init-from")
         if self.stand_branch_frozen and not self.stand_branch:
             raise ValueError("--stand-branch-frozen goes with --stand-branch")
+        if self.stand_gamma > 0 and not self.stand_branch:
+            raise ValueError("--stand-gamma goes with --stand-branch")
         if self.stand_branch_from and self.init_normalizer != "snapshot":
             raise ValueError("--stand-branch-from maps the start's normalised input: it needs "
                              "--init-normalizer snapshot")  # fmt: skip
@@ -413,6 +417,7 @@ _RANGES = (  # (field, min, max): every number a config or flag may set
     ("env_threads", 1, 256), ("n_steps", 1, 1 << 20), ("batch_size", 1, 1 << 24),
     ("n_epochs", 1, 1000), ("learning_rate", 0.0, 1.0), ("target_kl", 0.0, 10.0),
     ("gamma", 0.0, 1.0), ("gamma_final", 0.0, 1.0), ("gamma_ramp", 0, _BIG),
+    ("stand_gamma", 0.0, 1.0),
     ("gae_lambda", 0.0, 1.0), ("clip_range", 0.0, 10.0),
     ("ent_coef", -1.0, 10.0), ("log_std_init", -20.0, 5.0), ("sde_sample_freq", -1, _BIG),
     ("net_arch", 1, 4096), ("torch_threads", 1, 256), ("update_threads", 0, 256),

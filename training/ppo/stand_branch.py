@@ -22,12 +22,21 @@ The branch reads the run's normalised observation through a fixed affine map and
 run's actor (``stand_branch_from``) computes that run's own normalised input: exactly, for the
 run's observation statistics, which such a run holds fixed (``pin_command(frozen=True)``);
 entries that barely varied in the other run's statistics read 0, as they did there.
+
+The branch may look further ahead than the walker (``PPOConfig.stand_gamma``): its rows are
+discounted by their own factor in the advantages (:class:`BranchDiscountBuffer`, a discount that
+depends on the state, as in White 2017's transition-based discounting) and in the bootstrap of
+an episode cut by its time limit (:func:`truncation_discount`). A stander that comes to rest and
+drifts over seconds is then seen falling by its critic while the walker keeps the short horizon
+its speed tracking was trained at (``results/command_stage9``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
+from stable_baselines3.common.buffers import RolloutBuffer
+from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
 from biped_constraint_env.modes import N_MODELS
@@ -210,3 +219,70 @@ def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: 
         policy.branch_input.scale.copy_(torch.as_tensor(scale, dtype=torch.float32))
         policy.branch_input.shift.copy_(torch.as_tensor(shift, dtype=torch.float32))
         policy.branch_input.clip.fill_(float(source_norm["clip_obs"]))
+
+
+class BranchDiscountBuffer(RolloutBuffer):
+    """SB3's rollout buffer whose GAE discounts the branch's rows by ``stand_gamma``.
+
+    A transition from a row the branch acts on (:meth:`StandBranchPolicy.gate` of its stored
+    observation) discounts what follows it by ``stand_gamma``, every other one by the run's
+    ``gamma``; with the two equal this is SB3's GAE exactly.
+    """
+
+    def __init__(self, *args, stand_gamma: float, **kwargs):
+        super().__init__(*args, **kwargs)
+        if not 0.0 < stand_gamma <= 1.0:
+            raise ValueError(f"stand_gamma must be in (0, 1], got {stand_gamma!r}")
+        self.stand_gamma = float(stand_gamma)
+
+    def step_gammas(self) -> np.ndarray:
+        """The discount of every stored transition, (buffer_size, n_envs)."""
+        gate = StandBranchPolicy.gate(torch.as_tensor(self.observations)).numpy()
+        return np.where(gate, self.stand_gamma, self.gamma).astype(np.float32)
+
+    def compute_returns_and_advantage(self, last_values: torch.Tensor, dones: np.ndarray) -> None:
+        """GAE(lambda) and the lambda-returns, as SB3's, with each row's own discount."""
+        last_values = last_values.clone().cpu().numpy().flatten()
+        gammas = self.step_gammas()
+        last_gae_lam = 0.0
+        for step in reversed(range(self.buffer_size)):
+            if step == self.buffer_size - 1:
+                next_non_terminal = 1.0 - dones.astype(np.float32)
+                next_values = last_values
+            else:
+                next_non_terminal = 1.0 - self.episode_starts[step + 1]
+                next_values = self.values[step + 1]
+            g = gammas[step]
+            delta = self.rewards[step] + g * next_values * next_non_terminal - self.values[step]
+            last_gae_lam = delta + g * self.gae_lambda * next_non_terminal * last_gae_lam
+            self.advantages[step] = last_gae_lam
+        self.returns = self.advantages + self.values
+
+
+def truncation_discount(stand_gamma: float):
+    """A callback: an episode cut by its time limit on a branch row bootstraps at ``stand_gamma``.
+
+    SB3 adds ``gamma * V(terminal observation)`` to the reward of a transition that ends an
+    episode by its time limit, after the callbacks' step; this adds ``(stand_gamma - gamma) *
+    V`` first on the rows whose transition started where the branch acts, so that their
+    bootstrap uses the branch's discount, as :class:`BranchDiscountBuffer` does inside a rollout.
+    """
+
+    class TruncationDiscount(BaseCallback):
+        def _on_step(self) -> bool:
+            m = self.model
+            extra = stand_gamma - m.gamma
+            dones, infos, rewards = (self.locals[k] for k in ("dones", "infos", "rewards"))
+            if extra == 0 or not dones.any():
+                return True
+            gate = StandBranchPolicy.gate(torch.as_tensor(m._last_obs)).numpy()
+            for i in np.flatnonzero(dones & gate):
+                info = infos[i]
+                if info.get("terminal_observation") is None or not info.get("TimeLimit.truncated"):
+                    continue
+                obs = m.policy.obs_to_tensor(info["terminal_observation"])[0]
+                with torch.no_grad():
+                    rewards[i] += extra * float(m.policy.predict_values(obs)[0, 0])
+            return True
+
+    return TruncationDiscount()

@@ -464,6 +464,11 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         from training.ppo.exploration import stand_balance_callback
 
         balance = stand_balance_callback()
+    branch_discount = None
+    if cfg.stand_gamma > 0:
+        from training.ppo.stand_branch import truncation_discount
+
+        branch_discount = truncation_discount(cfg.stand_gamma)
     callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak,
                               more_state)  # fmt: skip
     callback.stopped = stopped
@@ -477,6 +482,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                     critic_warmup(cfg, anchor),
                     update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
                     *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0 else []),
+                    *([branch_discount] if branch_discount else []),
                     *([curriculum] if curriculum else []),
                     *([redraw] if redraw else []),
                     *([balance] if balance else []),
