@@ -153,6 +153,7 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"stand_branch": True, "stand_branch_from": "x", **COMMAND}, "--init-from"),
         ({"stand_branch_frozen": True, **COMMAND}, "goes with --stand-branch"),
         ({"stand_gamma": 0.99, **COMMAND}, "--stand-gamma goes with --stand-branch"),
+        ({"stand_branch": True, "stand_gamma": 1.0, **COMMAND}, "below 1"),
         ({"stand_branch": True, "stand_branch_from": "x", "init_from": "y",
           "init_normalizer": "fresh", **COMMAND}, "snapshot"),
     ],
@@ -203,7 +204,7 @@ def test_the_branch_discount_is_sb3s_gae_at_one_discount_and_each_rows_own_other
     plain, _, _, _, _ = _filled_buffer(stand_gamma=0.9, lam=1.0)
     assert not np.allclose(plain.returns, buf.returns)
     with pytest.raises(ValueError, match="stand_gamma"):
-        BranchDiscountBuffer(4, OBS, ACT, stand_gamma=1.5)
+        BranchDiscountBuffer(4, OBS, ACT, stand_gamma=1.0)
 
 
 def test_a_time_limit_on_a_branch_row_bootstraps_at_the_branch_discount():
@@ -211,7 +212,8 @@ def test_a_time_limit_on_a_branch_row_bootstraps_at_the_branch_discount():
 
     policy = _policy()
     last = _obs(4, [0.0, 0.0, 1.0, 0.0], [True, True, True, False]).numpy()  # rows 0, 1 gated
-    terminal = _obs(4, [0.0, 0.0, 0.0, 0.0], [True] * 4).numpy()
+    # the transition's start decides, not where it ended: row 0 ends at a nonzero command
+    terminal = _obs(4, [0.5, 0.0, 0.0, 0.0], [True] * 4).numpy()
     model = SimpleNamespace(gamma=0.9, _last_obs=last, policy=policy, num_timesteps=0)
     cb = truncation_discount(0.99)
     cb.init_callback(model)
@@ -227,10 +229,28 @@ def test_a_time_limit_on_a_branch_row_bootstraps_at_the_branch_discount():
     np.testing.assert_allclose(rewards, want, rtol=1e-5)
 
 
-def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_path):
+def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_path, monkeypatch):
     """A walker (init_from) and a stander (stand_branch_from) start one network, loaded as any."""
+    from training.ppo import stand_branch
     from training.ppo import train as train_ppo
     from training.ppo.policy_io import load_policy
+
+    calls = {"gae": 0, "steps": 0, "discounts": []}  # --stand-gamma reaches the run's PPO
+    gae = BranchDiscountBuffer.compute_returns_and_advantage
+
+    def counted_gae(self, *args, **kwargs):
+        calls["gae"] += 1
+        calls["discounts"].append(self.stand_gamma)
+        return gae(self, *args, **kwargs)
+
+    def counted_callback(g):
+        cb = truncation_discount(g)
+        on_step = cb._on_step
+        cb._on_step = lambda: calls.__setitem__("steps", calls["steps"] + 1) or on_step()
+        return cb
+
+    monkeypatch.setattr(BranchDiscountBuffer, "compute_returns_and_advantage", counted_gae)
+    monkeypatch.setattr(stand_branch, "truncation_discount", counted_callback)
 
     flags = ["--total-timesteps", "128", "--n-envs", "2", "--n-steps", "32", "--batch-size",
              "64", "--n-epochs", "1", "--eval-freq", "1000", "--checkpoint-freq", "64",
@@ -245,6 +265,8 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
                          str(walker), "--stand-branch", "--stand-branch-from",
                          str(stander), "--stand-gamma", "0.99"])  # fmt: skip
     assert rc == 0
+    assert calls["gae"] >= 2 and set(calls["discounts"]) == {0.99}  # 128 steps: 2 rollouts
+    assert calls["steps"] >= 64  # the time-limit bootstrap's callback saw every env step
     (run,) = (tmp_path / "b" / "train_ppo").iterdir()
     record = json.loads((run / "init_from.json").read_text())
     assert record["stand_branch_from"]["policy"] == str(stander)

@@ -212,6 +212,8 @@ class PPOConfig:
             raise ValueError("--stand-branch-frozen goes with --stand-branch")
         if self.stand_gamma > 0 and not self.stand_branch:
             raise ValueError("--stand-gamma goes with --stand-branch")
+        if self.stand_gamma >= 1.0:
+            raise ValueError(f"--stand-gamma must be below 1 (0: off), got {self.stand_gamma!r}")
         if self.stand_branch_from and self.init_normalizer != "snapshot":
             raise ValueError("--stand-branch-from maps the start's normalised input: it needs "
                              "--init-normalizer snapshot")  # fmt: skip

@@ -27,8 +27,10 @@ The branch may look further ahead than the walker (``PPOConfig.stand_gamma``): i
 discounted by their own factor in the advantages (:class:`BranchDiscountBuffer`, a discount that
 depends on the state, as in White 2017's transition-based discounting) and in the bootstrap of
 an episode cut by its time limit (:func:`truncation_discount`). A stander that comes to rest and
-drifts over seconds is then seen falling by its critic while the walker keeps the short horizon
-its speed tracking was trained at (``results/command_stage9``).
+drifts over seconds is then seen falling by its critic while the walker keeps its own short
+discount (a walker's transition into a branch row still bootstraps from the branch's
+longer-horizon value, so the walker's returns near a stop change too). A run started from
+another (``init_from``) does not inherit the option: give it again.
 """
 
 from __future__ import annotations
@@ -231,8 +233,8 @@ class BranchDiscountBuffer(RolloutBuffer):
 
     def __init__(self, *args, stand_gamma: float, **kwargs):
         super().__init__(*args, **kwargs)
-        if not 0.0 < stand_gamma <= 1.0:
-            raise ValueError(f"stand_gamma must be in (0, 1], got {stand_gamma!r}")
+        if not 0.0 < stand_gamma < 1.0:  # 1: a stander's value would grow without bound
+            raise ValueError(f"stand_gamma must be in (0, 1), got {stand_gamma!r}")
         self.stand_gamma = float(stand_gamma)
 
     def step_gammas(self) -> np.ndarray:
