@@ -9,8 +9,9 @@ in the loop; the command is set with ``env.unwrapped.set_command(v)`` before eve
 period: 1.5 m/s for 8 s, then 0 for 8 s, then 1.0 m/s for 10 s. ``--deadband``/``--ramp`` set the
 env's joystick options (``command={..., "deadband": D, "ramp_m_s2": A}``) over the policy's own.
 Prints, each second, the command held and the hip's mean speed over that second, then whether
-the stop came to rest (a second's mean hip speed below 0.05 m/s within 3 s of the stop, every
-later second of the stop below 0.1 m/s) and how the episode ended. Reads only POLICY; writes
+the stop came to rest by the evaluation protocol's test (``command_protocol.stands``: a control
+period's mean hip speed below 0.05 m/s within 3 s of the stop, held 5 s) and how the episode
+ended. Reads only POLICY; writes
 nothing.
 """
 
@@ -22,11 +23,11 @@ import gymnasium as gym
 import numpy as np
 
 import biped_constraint_env  # noqa: F401  (registers ConstrainedBiped-v0)
+from training.evaluation.command_protocol import period_speeds, stands
 from training.ppo.policy_io import load_policy, policy_actor
 
 SCHEDULE = ((8.0, 1.5), (16.0, 0.0), (26.0, 1.0))
 """(until [s], command [m/s]): the drive."""
-REST_M_S, HELD_M_S, STOP_WITHIN_S = 0.05, 0.1, 3.0
 
 
 def command_at(t: float) -> float:
@@ -71,14 +72,12 @@ def main(argv: list[str] | None = None) -> int:
     print("  second  command held at its start [m/s]  hip speed [m/s]")
     for k in seconds:
         print(f"{k:4d}-{k + 1:<3d}  {held[int(np.searchsorted(ts, k))]:32.2f}  {speed[k]:15.3f}")
-    stop_s, restart_s = int(SCHEDULE[0][0]), int(SCHEDULE[1][0])
-    stop = speed[stop_s:restart_s]
-    rest = np.flatnonzero(np.abs(stop[: int(STOP_WITHIN_S)]) < REST_M_S)
-    stood = (len(stop) == restart_s - stop_s and rest.size > 0
-             and bool(np.all(np.abs(stop[rest[0]:]) < HELD_M_S)))  # fmt: skip
+    # the protocol's stop test (training.evaluation.command_protocol.stands) from the moment
+    # the drive sets 0: at rest within 3 s, held 5 s
+    t, v = period_speeds({"t": ts, "hip_y": ys})
+    stood, drift = stands(t, v, SCHEDULE[0][0], ts[-1])
     print(
-        f"stop: {'at rest' if stood else 'not at rest'}"
-        f"{f' from {stop_s + rest[0]} s' if stood else ''}; steps "
+        f"stop: {f'at rest, drift {drift:.3f} m/s' if stood else 'not at rest'}; steps "
         f"{int(info['steps_completed'])}; ended: {end} at {info['t']:.2f} s"
     )
     env.close()

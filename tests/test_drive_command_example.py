@@ -44,7 +44,7 @@ def test_a_network_that_stops_comes_to_rest_with_the_joystick_options_and_walks_
     rows = _seconds(out)
     assert "'deadband': 0.2, 'ramp_m_s2': 1.0" in out
     assert rows[9][0] < 1.5  # the ramp: the held command falls at 1.0 m/s^2 after 8 s
-    assert all(abs(rows[k][1]) < 0.05 for k in range(10, 16)) and "at rest from 10 s" in out
+    assert all(abs(rows[k][1]) < 0.05 for k in range(10, 16)) and "stop: at rest, drift" in out
     assert all(rows[k][1] > 0.9 for k in range(18, 26)) and rc == 0
 
 

@@ -34,7 +34,7 @@ print(f"# {sys.argv[2]}/ at {state['num_timesteps']} env steps")
 stood = []
 for k in np.argsort(walk):
     ep = eps[k]
-    t, v = cp._speed_at(ep)
+    t, v = cp.period_speeds(ep)
     ok = cp.stands(t, v, cp.STOP_AT_S, ep["t"][-1])[0]
     stood.append((walk[k], ok))
     print(f"{ep['seed']} walk {walk[k]:.2f} m/s, {np.interp(cp.STOP_AT_S, t, v):.2f} m/s at the "

@@ -111,7 +111,7 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
             for i, s in enumerate(seeds)]  # fmt: skip
 
 
-def _speed_at(ep: dict) -> tuple[np.ndarray, np.ndarray]:
+def period_speeds(ep: dict) -> tuple[np.ndarray, np.ndarray]:
     """(t at each period's end, the period's mean hip speed [m/s])."""
     t, y = np.asarray(ep["t"]), np.asarray(ep["hip_y"])
     return t[1:], np.diff(y) / np.maximum(np.diff(t), 1e-12)
@@ -191,7 +191,7 @@ def stop_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     eps = run_commanded(act, env_kwargs, seeds, command, restart_at + 10.0, env_id)
     stood, restarted, drifts = [], [], []
     for ep in eps:
-        t, v = _speed_at(ep)
+        t, v = period_speeds(ep)
         stand, drift = stands(t, v, STOP_AT_S, ep["t"][-1])
         stood.append(stand)
         drifts.append(drift)
