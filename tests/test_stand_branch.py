@@ -10,12 +10,14 @@ from gymnasium import spaces
 from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from training.ppo.config import PPOConfig
+from training.ppo.config import PPOConfig, _choices
 from training.ppo.stand_branch import (
+    DISCOUNT_ROWS,
     MODE_ENTRY,
     BranchDiscountBuffer,
     StandBranchPolicy,
     branch_from,
+    discount_gate,
     truncation_discount,
 )
 
@@ -154,6 +156,10 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"stand_branch_frozen": True, **COMMAND}, "goes with --stand-branch"),
         ({"stand_gamma": 0.99, **COMMAND}, "--stand-gamma goes with --stand-branch"),
         ({"stand_branch": True, "stand_gamma": 1.0, **COMMAND}, "below 1"),
+        ({"stand_branch": True, "stand_gamma_rows": "zero_command", **COMMAND},
+         "--stand-gamma-rows goes with --stand-gamma"),
+        ({"stand_branch": True, "stand_gamma": 0.99, "stand_gamma_rows": "stand", **COMMAND},
+         "stand.gamma.rows"),
         ({"stand_branch": True, "stand_branch_from": "x", "init_from": "y",
           "init_normalizer": "fresh", **COMMAND}, "snapshot"),
     ],
@@ -164,12 +170,21 @@ def test_the_option_is_refused_where_it_means_nothing(kwargs, match):
     PPOConfig(stand_branch=True, target_kl=0.02, **COMMAND).validate()
 
 
-def _filled_buffer(stand_gamma, gamma=0.9, lam=0.95, seed=0):
-    """A rollout of 4 steps x 3 envs: branch rows where the command is 0 in model 4."""
+def test_the_discount_rows_are_the_configs_choices():
+    assert _choices()["stand_gamma_rows"] == DISCOUNT_ROWS
+    with pytest.raises(ValueError, match="rows must be one of"):
+        discount_gate(_obs(2, [0.0, 1.0], [True, True]), "stand")
+    with pytest.raises(ValueError, match="rows must be one of"):
+        truncation_discount(0.99, "stand")
+
+
+def _filled_buffer(stand_gamma, gamma=0.9, lam=0.95, seed=0, rows="branch"):
+    """A rollout of 4 steps x 3 envs: branch rows where the command is 0 in model 4; the
+    gate of ``rows`` returned."""
     rng = np.random.default_rng(seed)
     kw = {"gamma": gamma, "gae_lambda": lam, "device": "cpu", "n_envs": 3}
-    buf = (BranchDiscountBuffer(4, OBS, ACT, stand_gamma=stand_gamma, **kw) if stand_gamma
-           else RolloutBuffer(4, OBS, ACT, **kw))  # fmt: skip
+    buf = (BranchDiscountBuffer(4, OBS, ACT, stand_gamma=stand_gamma, rows=rows, **kw)
+           if stand_gamma else RolloutBuffer(4, OBS, ACT, **kw))  # fmt: skip
     commands = [[0.0, 0.0, 1.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     mode4 = [[True, False, True], [True, True, True], [False, True, True], [True, True, False]]
     starts = [[1, 1, 1], [0, 0, 0], [0, 1, 0], [0, 0, 0]]
@@ -180,19 +195,25 @@ def _filled_buffer(stand_gamma, gamma=0.9, lam=0.95, seed=0):
                 log_prob)  # fmt: skip
     last_values, dones = torch.as_tensor(rng.normal(size=3)), np.array([False, True, False])
     buf.compute_returns_and_advantage(last_values, dones)
-    gate = (np.array(commands) == 0) & np.array(mode4)
+    gate = np.array(commands) == 0
+    if rows == "branch":
+        gate &= np.array(mode4)
     return buf, gate, np.array(starts), last_values.numpy(), dones
 
 
-def test_the_branch_discount_is_sb3s_gae_at_one_discount_and_each_rows_own_otherwise():
-    ours, _, _, _, _ = _filled_buffer(stand_gamma=0.9)
+@pytest.mark.parametrize("rows", DISCOUNT_ROWS)
+def test_the_branch_discount_is_sb3s_gae_at_one_discount_and_each_rows_own_otherwise(rows):
+    ours, _, _, _, _ = _filled_buffer(stand_gamma=0.9, rows=rows)
     sb3, _, _, _, _ = _filled_buffer(stand_gamma=0.0)  # SB3's own buffer, same data
     np.testing.assert_allclose(ours.advantages, sb3.advantages, rtol=1e-6)
     np.testing.assert_allclose(ours.returns, sb3.returns, rtol=1e-6)
     # lambda = 1: the return is the discounted sum, each step discounting what follows by its
     # own row's factor, bootstrapped at the rollout's end (by hand, not GAE's recursion)
-    buf, gate, starts, last_values, dones = _filled_buffer(stand_gamma=0.99, lam=1.0)
+    buf, gate, starts, last_values, dones = _filled_buffer(stand_gamma=0.99, lam=1.0, rows=rows)
     assert 0 < gate.sum() < gate.size  # both kinds of rows: the test could fail
+    other, _, _, _, _ = _filled_buffer(stand_gamma=0.99, lam=1.0, rows=sorted(
+        set(DISCOUNT_ROWS) - {rows})[0])  # fmt: skip
+    assert not np.allclose(other.returns, buf.returns)  # the rows matter: model 4 or not
     np.testing.assert_array_equal(buf.step_gammas(), np.where(gate, 0.99, 0.9).astype(np.float32))
     for env in range(3):
         ret = last_values[env] * (1.0 - dones[env])
@@ -205,17 +226,21 @@ def test_the_branch_discount_is_sb3s_gae_at_one_discount_and_each_rows_own_other
     assert not np.allclose(plain.returns, buf.returns)
     with pytest.raises(ValueError, match="stand_gamma"):
         BranchDiscountBuffer(4, OBS, ACT, stand_gamma=1.0)
+    with pytest.raises(ValueError, match="rows"):
+        BranchDiscountBuffer(4, OBS, ACT, stand_gamma=0.99, rows="stand")
 
 
-def test_a_time_limit_on_a_branch_row_bootstraps_at_the_branch_discount():
+@pytest.mark.parametrize("rows", DISCOUNT_ROWS)
+def test_a_time_limit_on_a_branch_row_bootstraps_at_the_branch_discount(rows):
     from types import SimpleNamespace
 
     policy = _policy()
-    last = _obs(4, [0.0, 0.0, 1.0, 0.0], [True, True, True, False]).numpy()  # rows 0, 1 gated
+    # rows 0, 1 gated in model 4; row 3 at a zero command in another contact state
+    last = _obs(4, [0.0, 0.0, 1.0, 0.0], [True, True, True, False]).numpy()
     # the transition's start decides, not where it ended: row 0 ends at a nonzero command
     terminal = _obs(4, [0.5, 0.0, 0.0, 0.0], [True] * 4).numpy()
     model = SimpleNamespace(gamma=0.9, _last_obs=last, policy=policy, num_timesteps=0)
-    cb = truncation_discount(0.99)
+    cb = truncation_discount(0.99, rows)
     cb.init_callback(model)
     rewards = np.array([1.0, 2.0, 3.0, 4.0], dtype=np.float32)
     dones = np.array([True, True, True, True])
@@ -224,8 +249,10 @@ def test_a_time_limit_on_a_branch_row_bootstraps_at_the_branch_discount():
     cb.update_locals({"rewards": rewards, "dones": dones, "infos": infos})
     assert cb.on_step()
     with torch.no_grad():
-        v0 = float(policy.predict_values(torch.as_tensor(terminal[:1]))[0, 0])
-    want = [1.0 + 0.09 * v0, 2.0, 3.0, 4.0]  # only the gated, time-limited row moves
+        v = policy.predict_values(torch.as_tensor(terminal))[:, 0].numpy()
+    want = [1.0 + 0.09 * v[0], 2.0, 3.0, 4.0]  # only the gated, time-limited rows move
+    if rows == "zero_command":
+        want[3] += 0.09 * v[3]
     np.testing.assert_allclose(rewards, want, rtol=1e-5)
 
 
@@ -235,16 +262,17 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     from training.ppo import train as train_ppo
     from training.ppo.policy_io import load_policy
 
-    calls = {"gae": 0, "steps": 0, "discounts": []}  # --stand-gamma reaches the run's PPO
+    calls = {"gae": 0, "steps": 0, "discounts": [], "rows": []}  # --stand-gamma reaches PPO
     gae = BranchDiscountBuffer.compute_returns_and_advantage
 
     def counted_gae(self, *args, **kwargs):
         calls["gae"] += 1
-        calls["discounts"].append(self.stand_gamma)
+        calls["discounts"].append((self.stand_gamma, self.rows))
         return gae(self, *args, **kwargs)
 
-    def counted_callback(g):
-        cb = truncation_discount(g)
+    def counted_callback(g, rows):
+        calls["rows"].append(rows)
+        cb = truncation_discount(g, rows)
         on_step = cb._on_step
         cb._on_step = lambda: calls.__setitem__("steps", calls["steps"] + 1) or on_step()
         return cb
@@ -263,9 +291,11 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     tiny = ["--learning-rate", "1e-12"]
     rc = train_ppo.main([*flags, *tiny, "--out-dir", str(tmp_path / "b"), "--init-from",
                          str(walker), "--stand-branch", "--stand-branch-from",
-                         str(stander), "--stand-gamma", "0.99"])  # fmt: skip
+                         str(stander), "--stand-gamma", "0.99", "--stand-gamma-rows",
+                         "zero_command"])  # fmt: skip
     assert rc == 0
-    assert calls["gae"] >= 2 and set(calls["discounts"]) == {0.99}  # 128 steps: 2 rollouts
+    assert calls["gae"] >= 2  # 128 steps: 2 rollouts
+    assert set(calls["discounts"]) == {(0.99, "zero_command")} and calls["rows"] == ["zero_command"]
     assert calls["steps"] >= 64  # the time-limit bootstrap's callback saw every env step
     (run,) = (tmp_path / "b" / "train_ppo").iterdir()
     record = json.loads((run / "init_from.json").read_text())

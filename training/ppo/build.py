@@ -40,7 +40,8 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         from training.ppo.stand_branch import BranchDiscountBuffer
 
         extra["rollout_buffer_class"] = BranchDiscountBuffer
-        extra["rollout_buffer_kwargs"] = {"stand_gamma": cfg.stand_gamma}
+        extra["rollout_buffer_kwargs"] = {"stand_gamma": cfg.stand_gamma,
+                                          "rows": cfg.stand_gamma_rows}  # fmt: skip
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)

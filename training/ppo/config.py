@@ -130,6 +130,8 @@ class PPOConfig:
     # (its critic does): a stage in which only the walker learns to hand over to it
     stand_gamma: float = 0.0  # > 0, with stand_branch: the discount of the rows the branch acts
     # on (the walker's stay gamma): a stander that sees a slow drift's fall seconds ahead
+    stand_gamma_rows: str = "branch"  # where stand_gamma holds: "branch" (command 0 in model
+    # 4) or "zero_command" (command 0 in any contact state: the walker's braking steps too)
     action_bias_nm: tuple[float, ...] = ()  # 5 values: the initial bias of the network's
     # action mean [N m] per joint (its last layer's bias, learned from there like any weight:
     # a random network whose first actions pass the mid-stride start)
@@ -212,6 +214,8 @@ class PPOConfig:
             raise ValueError("--stand-branch-frozen goes with --stand-branch")
         if self.stand_gamma > 0 and not self.stand_branch:
             raise ValueError("--stand-gamma goes with --stand-branch")
+        if self.stand_gamma_rows != "branch" and self.stand_gamma <= 0:
+            raise ValueError("--stand-gamma-rows goes with --stand-gamma")
         if self.stand_gamma >= 1.0:
             raise ValueError(f"--stand-gamma must be below 1 (0: off), got {self.stand_gamma!r}")
         if self.stand_branch_from and self.init_normalizer != "snapshot":
@@ -448,6 +452,7 @@ def _choices() -> dict[str, tuple]:
         "lr_schedule": ("constant", "linear"),
         "select_by": ("mean", "min", "return"),
         "init_normalizer": ("snapshot", "fresh"),
+        "stand_gamma_rows": ("branch", "zero_command"),
         "activation": ACTIVATIONS,
     }
 

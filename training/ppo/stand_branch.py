@@ -29,8 +29,11 @@ depends on the state, as in White 2017's transition-based discounting) and in th
 an episode cut by its time limit (:func:`truncation_discount`). A stander that comes to rest and
 drifts over seconds is then seen falling by its critic while the walker keeps its own short
 discount (a walker's transition into a branch row still bootstraps from the branch's
-longer-horizon value, so the walker's returns near a stop change too). A run started from
-another (``init_from``) does not inherit the option: give it again.
+longer-horizon value, so the walker's returns near a stop change too). With
+``PPOConfig.stand_gamma_rows`` "zero_command" the longer discount holds on every row commanded
+to stop, in any contact state: the walker's braking steps before both feet are down then see
+the stop's fall seconds ahead too, while the walk at any other command keeps its short
+horizon. A run started from another (``init_from``) does not inherit the option: give it again.
 """
 
 from __future__ import annotations
@@ -223,23 +226,42 @@ def branch_from(policy: StandBranchPolicy, source, source_norm: dict, run_mean: 
         policy.branch_input.clip.fill_(float(source_norm["clip_obs"]))
 
 
+DISCOUNT_ROWS = ("branch", "zero_command")
+"""Where ``stand_gamma`` holds: the branch's rows, or every row whose command is 0."""
+
+
+def discount_gate(obs: torch.Tensor, rows: str = "branch") -> torch.Tensor:
+    """The rows discounted by ``stand_gamma``, a boolean per row of ``obs``.
+
+    ``rows="branch"``: :meth:`StandBranchPolicy.gate`'s; ``"zero_command"``: every row whose
+    command (the last entry, in m/s) is exactly 0.
+    """
+    if rows == "branch":
+        return StandBranchPolicy.gate(obs)
+    if rows == "zero_command":
+        return obs.float()[..., -1] == 0
+    raise ValueError(f"rows must be one of {DISCOUNT_ROWS}, got {rows!r}")
+
+
 class BranchDiscountBuffer(RolloutBuffer):
     """SB3's rollout buffer whose GAE discounts the branch's rows by ``stand_gamma``.
 
-    A transition from a row the branch acts on (:meth:`StandBranchPolicy.gate` of its stored
-    observation) discounts what follows it by ``stand_gamma``, every other one by the run's
-    ``gamma``; with the two equal this is SB3's GAE exactly.
+    A transition from a row of ``rows`` (:func:`discount_gate` of its stored observation:
+    the branch's by default) discounts what follows it by ``stand_gamma``, every other one by
+    the run's ``gamma``; with the two equal this is SB3's GAE exactly.
     """
 
-    def __init__(self, *args, stand_gamma: float, **kwargs):
+    def __init__(self, *args, stand_gamma: float, rows: str = "branch", **kwargs):
         super().__init__(*args, **kwargs)
         if not 0.0 < stand_gamma < 1.0:  # 1: a stander's value would grow without bound
             raise ValueError(f"stand_gamma must be in (0, 1), got {stand_gamma!r}")
-        self.stand_gamma = float(stand_gamma)
+        if rows not in DISCOUNT_ROWS:
+            raise ValueError(f"rows must be one of {DISCOUNT_ROWS}, got {rows!r}")
+        self.stand_gamma, self.rows = float(stand_gamma), rows
 
     def step_gammas(self) -> np.ndarray:
         """The discount of every stored transition, (buffer_size, n_envs)."""
-        gate = StandBranchPolicy.gate(torch.as_tensor(self.observations)).numpy()
+        gate = discount_gate(torch.as_tensor(self.observations), self.rows).numpy()
         return np.where(gate, self.stand_gamma, self.gamma).astype(np.float32)
 
     def compute_returns_and_advantage(self, last_values: torch.Tensor, dones: np.ndarray) -> None:
@@ -261,14 +283,16 @@ class BranchDiscountBuffer(RolloutBuffer):
         self.returns = self.advantages + self.values
 
 
-def truncation_discount(stand_gamma: float):
-    """A callback: an episode cut by its time limit on a branch row bootstraps at ``stand_gamma``.
+def truncation_discount(stand_gamma: float, rows: str = "branch"):
+    """A callback: an episode cut by its time limit on a ``rows`` row bootstraps at ``stand_gamma``.
 
     SB3 adds ``gamma * V(terminal observation)`` to the reward of a transition that ends an
     episode by its time limit, after the callbacks' step; this adds ``(stand_gamma - gamma) *
-    V`` first on the rows whose transition started where the branch acts, so that their
-    bootstrap uses the branch's discount, as :class:`BranchDiscountBuffer` does inside a rollout.
+    V`` first on the rows whose transition started on such a row (:func:`discount_gate`), so
+    that their bootstrap uses that discount, as :class:`BranchDiscountBuffer` does inside a rollout.
     """
+    if rows not in DISCOUNT_ROWS:
+        raise ValueError(f"rows must be one of {DISCOUNT_ROWS}, got {rows!r}")
 
     class TruncationDiscount(BaseCallback):
         def _on_step(self) -> bool:
@@ -277,7 +301,7 @@ def truncation_discount(stand_gamma: float):
             dones, infos, rewards = (self.locals[k] for k in ("dones", "infos", "rewards"))
             if extra == 0 or not dones.any():
                 return True
-            gate = StandBranchPolicy.gate(torch.as_tensor(m._last_obs)).numpy()
+            gate = discount_gate(torch.as_tensor(m._last_obs), rows).numpy()
             for i in np.flatnonzero(dones & gate):
                 info = infos[i]
                 if info.get("terminal_observation") is None or not info.get("TimeLimit.truncated"):

@@ -468,7 +468,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     if cfg.stand_gamma > 0:
         from training.ppo.stand_branch import truncation_discount
 
-        branch_discount = truncation_discount(cfg.stand_gamma)
+        branch_discount = truncation_discount(cfg.stand_gamma, cfg.stand_gamma_rows)
     callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak,
                               more_state)  # fmt: skip
     callback.stopped = stopped
