@@ -3,7 +3,8 @@
     python examples/drive_command.py POLICY [--which best|final] [--deadband D] [--ramp A]
                                      [--seed S]
 
-POLICY: a command policy's directory (``policies/ppo_command_50hz``, or a run directory that
+POLICY: a command policy's directory (``policies/ppo_command_stop_50hz``, which stops and
+stands at a zero command, ``policies/ppo_command_50hz``, which walks on, or a run directory that
 ``training.ppo.train`` wrote). One single env from the paper's rest posture, the network alone
 in the loop; the command is set with ``env.unwrapped.set_command(v)`` before every control
 period: 1.5 m/s for 8 s, then 0 for 8 s, then 1.0 m/s for 10 s. ``--deadband``/``--ramp`` set the

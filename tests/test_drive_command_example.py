@@ -9,7 +9,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "drive_command.py"
-STOPPER = ROOT / "results" / "command_stage10" / "r1_n1_speed_1_k16"
+STOPPER = ROOT / "policies" / "ppo_command_stop_50hz"
 
 
 def _example():
@@ -38,8 +38,9 @@ def test_the_committed_policy_follows_the_drive_but_walks_on_at_a_zero_command(c
     assert rows[12][0] == 0.0 and rows[12][1] > 0.3 and rc == 1  # told 0, still walking
 
 
-def test_a_network_that_stops_comes_to_rest_with_the_joystick_options_and_walks_again(capsys):
-    rc = _example().main([str(STOPPER), "--deadband", "0.2", "--ramp", "1.0", "--seed", "3"])
+def test_the_committed_policy_that_stops_comes_to_rest_and_walks_again(capsys):
+    """Its own env's joystick options (deadband 0.2 m/s, ramp 1.0 m/s^2), no flag given."""
+    rc = _example().main([str(STOPPER), "--seed", "3"])
     out = capsys.readouterr().out
     rows = _seconds(out)
     assert "'deadband': 0.2, 'ramp_m_s2': 1.0" in out

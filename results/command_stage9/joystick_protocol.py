@@ -1,11 +1,11 @@
 """The command protocol of a run's network with the env's joystick options changed at run time.
 
-python joystick_protocol.py RUN {best,final,checkpoint} DEADBAND [RAMP [N]] -> stdout: the
-command protocol's rows (start, tracking, stop and restart, sequences;
-``command_protocol.run_protocol``) on N development episodes (default 20; seeds 700000+, as
-``evaluate --episodes N --seed 700000``) in the run's env with ``command={...,
-"deadband": DEADBAND [m/s], "ramp_m_s2": RAMP [m/s^2]}`` (RAMP omitted or 0: no ramp). The
-network is unchanged; only the commands it is given are.
+python joystick_protocol.py RUN {best,final,checkpoint} DEADBAND [RAMP [N [SEED]]] -> stdout:
+the command protocol's rows (start, tracking, stop and restart, sequences;
+``command_protocol.run_protocol``) on N episodes (default 20) of seeds SEED+ (default 700000,
+the development seeds; as ``evaluate --episodes N --seed SEED``) in the run's env with
+``command={..., "deadband": DEADBAND [m/s], "ramp_m_s2": RAMP [m/s^2]}`` (RAMP omitted or 0: no
+ramp). The network is unchanged; only the commands it is given are.
 """
 
 import sys
@@ -22,7 +22,8 @@ if len(sys.argv) > 4 and float(sys.argv[4]) > 0:
     joystick["ramp_m_s2"] = float(sys.argv[4])
 kw = cfg.env_kwargs()
 kw["command"] = {**(kw.get("command") or {}), **joystick}
-seeds = list(range(700000, 700000 + (int(sys.argv[5]) if len(sys.argv) > 5 else 20)))
+first = int(sys.argv[6]) if len(sys.argv) > 6 else 700000
+seeds = list(range(first, first + (int(sys.argv[5]) if len(sys.argv) > 5 else 20)))
 rows = cp.run_protocol(policy_batch_actor(policy, norm, cfg), kw, seeds, cfg.env_id)
 print(f"# {sys.argv[2]}/ at {state['num_timesteps']} env steps; command option {kw['command']}")
 print(cp.markdown(rows), end="")
