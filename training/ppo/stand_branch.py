@@ -61,6 +61,11 @@ sensor noise) up a hundredfold and more, so the branch reads 0 for it, the value
 saw it at (the stander's foot rate: 0.002 rad/s there, 0.42 in a walk, 0.05 of sensor noise)."""
 
 
+def zero_command(obs: torch.Tensor) -> torch.Tensor:
+    """The rows of ``obs`` whose command (the last entry, in m/s) is exactly 0."""
+    return obs.float()[..., -1] == 0
+
+
 class InputMap(nn.Module):
     """``clip(scale * x + shift, -clip, clip)``: fixed (buffers, saved with the weights)."""
 
@@ -141,8 +146,7 @@ class StandBranchPolicy(RowPolicy):
         ``-mean / std`` <= 0 elsewhere: read by its sign, for a mean below 1 (statistics from
         data that was not all model 4; :func:`branch_from` refuses held ones that were).
         """
-        obs = obs.float()
-        return (obs[..., -1] == 0) & (obs[..., MODE_ENTRY] > 0)
+        return zero_command(obs) & (obs.float()[..., MODE_ENTRY] > 0)
 
     def _see(self, obs) -> None:
         if obs is None:
@@ -236,11 +240,14 @@ def discount_gate(obs: torch.Tensor, rows: str = "branch") -> torch.Tensor:
     ``rows="branch"``: :meth:`StandBranchPolicy.gate`'s; ``"zero_command"``: every row whose
     command (the last entry, in m/s) is exactly 0.
     """
-    if rows == "branch":
-        return StandBranchPolicy.gate(obs)
-    if rows == "zero_command":
-        return obs.float()[..., -1] == 0
-    raise ValueError(f"rows must be one of {DISCOUNT_ROWS}, got {rows!r}")
+    return StandBranchPolicy.gate(obs) if check_rows(rows) == "branch" else zero_command(obs)
+
+
+def check_rows(rows: str) -> str:
+    """``rows`` if it is one of :data:`DISCOUNT_ROWS`, else ValueError."""
+    if rows not in DISCOUNT_ROWS:
+        raise ValueError(f"rows must be one of {DISCOUNT_ROWS}, got {rows!r}")
+    return rows
 
 
 class BranchDiscountBuffer(RolloutBuffer):
@@ -255,9 +262,7 @@ class BranchDiscountBuffer(RolloutBuffer):
         super().__init__(*args, **kwargs)
         if not 0.0 < stand_gamma < 1.0:  # 1: a stander's value would grow without bound
             raise ValueError(f"stand_gamma must be in (0, 1), got {stand_gamma!r}")
-        if rows not in DISCOUNT_ROWS:
-            raise ValueError(f"rows must be one of {DISCOUNT_ROWS}, got {rows!r}")
-        self.stand_gamma, self.rows = float(stand_gamma), rows
+        self.stand_gamma, self.rows = float(stand_gamma), check_rows(rows)
 
     def step_gammas(self) -> np.ndarray:
         """The discount of every stored transition, (buffer_size, n_envs)."""
@@ -291,8 +296,7 @@ def truncation_discount(stand_gamma: float, rows: str = "branch"):
     V`` first on the rows whose transition started on such a row (:func:`discount_gate`), so
     that their bootstrap uses that discount, as :class:`BranchDiscountBuffer` does inside a rollout.
     """
-    if rows not in DISCOUNT_ROWS:
-        raise ValueError(f"rows must be one of {DISCOUNT_ROWS}, got {rows!r}")
+    check_rows(rows)
 
     class TruncationDiscount(BaseCallback):
         def _on_step(self) -> bool:
