@@ -1015,3 +1015,18 @@ def test_a_stopped_flag_that_is_not_a_boolean_is_refused(run):
     with pytest.raises(SystemExit) as e:
         train_ppo.main(["--resume", str(run), "--progress", "false"])
     _one_line_refusal(e, "stopped must be a boolean")
+
+
+def test_a_runs_command_txt_pastes_back_as_it_ran(tmp_path):
+    """command.txt is the command line shell-quoted: a TOML table flag splits back whole."""
+    import shlex
+
+    from training.plumbing.common import make_run_dir
+    from training.ppo.config import PPOConfig
+
+    argv = ["--seed", "3", "--train-env", "start={stride=0.2, rest=0.8}", "--out-dir", "a b"]
+    run = make_run_dir(tmp_path, "train_ppo", "ConstrainedBiped-v0", 3, PPOConfig(), argv)
+    run.close()
+    (path,) = (tmp_path / "train_ppo").iterdir()
+    words = shlex.split((path / "command.txt").read_text())
+    assert words[1:3] == ["-m", "training.train_ppo"] and words[3:] == argv

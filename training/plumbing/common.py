@@ -17,6 +17,7 @@ import json
 import math
 import os
 import platform
+import shlex
 import subprocess
 import sys
 from collections.abc import Iterator, Sequence
@@ -398,6 +399,8 @@ def make_run_dir(
 ):
     """Create a fresh run directory with config.toml, command.txt and versions.json.
 
+    ``command.txt`` is the command line shell-quoted (``shlex.join``): it pastes back as it ran.
+
     ``module``: the command's module, for command.txt (default ``training.SCRIPT``).
     ``OUT_DIR/SCRIPT/ENV__seedS__STAMP`` is made with ``mkdir`` through its opened parent
     (a name that exists, a link included, takes the next suffix). Returns the run's
@@ -421,7 +424,7 @@ def make_run_dir(
     run.write("config.toml", to_toml(cfg))
     cmd = [sys.executable, "-m", module or f"training.{script}",
            *(sys.argv[1:] if argv is None else argv)]  # fmt: skip
-    run.write("command.txt", " ".join(cmd) + "\n")
+    run.write("command.txt", shlex.join(cmd) + "\n")  # pastes back into a shell as run
     run.write("versions.json", json.dumps(versions(), indent=2) + "\n")
     return run
 
