@@ -274,6 +274,48 @@ def test_a_second_stage_that_observes_more_starts_from_the_same_function(tmp_pat
         train_ppo.main([*flags, *dropped, "--out-dir", str(tmp_path / "b")])
 
 
+def test_a_network_with_a_standing_branch_widens_to_the_same_function(tmp_path):
+    """The stop policy (a walker and a standing branch) widened for the gravity entries: both
+    heads and both critics compute what the start computed, whatever the slope."""
+    import torch
+
+    from training.ppo import train as train_ppo
+    from training.ppo.policy_io import load_policy
+
+    src = Path(__file__).resolve().parents[1] / "policies" / "ppo_command_stop_50hz"
+    flags = ["--config", str(src / "config.toml"), "--total-timesteps", "64", "--n-envs", "2",
+             "--n-steps", "32", "--batch-size", "64", "--n-epochs", "1", "--eval-freq", "1000",
+             "--checkpoint-freq", "64", "--progress", "false", "--learning-rate", "1e-12",
+             "--init-from", str(src), "--env", 'observation=["phase", "gravity"]',
+             "--out-dir", str(tmp_path)]  # fmt: skip
+    assert train_ppo.main(flags) == 0
+    (run,) = (tmp_path / "train_ppo").iterdir()
+    new, new_norm, cfg, _ = load_policy(run, "final")
+    old, old_norm, _, _ = load_policy(src)
+    rng = np.random.default_rng(1)
+    obs = rng.normal(0.0, 1.0, (64, 27)) * np.sqrt(old_norm.var) + old_norm.mean
+    obs[:32, 17:21] = [0.0, 0.0, 0.0, 1.0]  # model 4 at a zero command: the branch's rows
+    obs[:32, 26] = 0.0
+    slope = rng.uniform(-0.1, 0.1, 64)
+    wide = np.concatenate([obs[:, :26], -np.sin(slope)[:, None], -np.cos(slope)[:, None],
+                           obs[:, 26:]], axis=1)  # fmt: skip
+    with torch.no_grad():
+        x_old = torch.as_tensor(old_norm(obs), dtype=torch.float32)
+        x_new = torch.as_tensor(new_norm(wide), dtype=torch.float32)
+        assert old.gate(x_old)[:32].all() and not old.gate(x_old)[32:].any()
+        assert torch.equal(new.gate(x_new), old.gate(x_old))
+        v_old, v_new = old.predict_values(x_old), new.predict_values(x_new)
+        f_old, f_new = old.extract_features(x_old), new.extract_features(x_new)
+        b_old, b_new = old.branch_values(f_old), new.branch_values(f_new)  # every row
+        m_old, m_new = old.branch_mean(f_old), new.branch_mean(f_new)
+        a_old = old.get_distribution(x_old).distribution.mean
+        a_new = new.get_distribution(x_new).distribution.mean
+    for a, b in ((v_old, v_new), (b_old, b_new)):  # the critics, in the runs' return units
+        assert (a - b).abs().max() < 1e-4 * (1 + a.abs().max())
+    assert (m_old - m_new).abs().max() < 1e-5  # the standing head on every row
+    assert (a_old - a_new).abs().max() < 1e-5  # actions: the same function, gravity weight 0
+
+
 def test_tracking_config_trains_evaluates_without_reference_starts_and_compares(
     tmp_path, monkeypatch
 ):

@@ -20,6 +20,11 @@ from training.plumbing.safe_files import Snapshot, load_safetensors
 
 FIRST_LAYERS = ("mlp_extractor.policy_net.0.weight", "mlp_extractor.value_net.0.weight")
 """The weights that read the observation (after the normaliser): (hidden, observation)."""
+BRANCH_FIRST_LAYERS = ("branch_net.0.weight", "branch_value_net.0.weight")
+"""A standing branch's (``training.ppo.stand_branch``) weights that read the observation."""
+BRANCH_INPUT = ("branch_input.scale", "branch_input.shift")
+"""A standing branch's fixed input map ``scale * x + shift`` (one entry per observation entry):
+an added entry gets 1 and 0, read as the run's normaliser gives it, like the walker's."""
 
 
 def added_entries(old: tuple[str, ...], new: tuple[str, ...]) -> list[int]:
@@ -50,8 +55,9 @@ def _insert(a: np.ndarray, added: list[int], values, axis: int) -> np.ndarray:
 def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.ndarray) -> Snapshot:
     """An in-memory copy of ``snap`` whose network and normaliser read the ``added`` entries.
 
-    The policy's first layers gain zero columns at ``added``, the observation statistics
-    ``mean`` and ``var`` there; every other file is the snapshot's own. ValueError where the
+    The policy's first layers gain zero columns at ``added`` (a standing branch's too, its input
+    map 1 and 0 there), the observation statistics ``mean`` and ``var`` there; every other file
+    is the snapshot's own. ValueError where the
     snapshot's network has no such first layers (an in-network normaliser).
     """
     import torch
@@ -67,8 +73,14 @@ def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.n
     tensors = load_safetensors(snap.name(POLICY_FILE), snap.files[POLICY_FILE])
     if not all(k in tensors and tensors[k].dim() == 2 for k in FIRST_LAYERS):
         raise ValueError(f"{snap.path}: no first layers {FIRST_LAYERS} to widen")
-    for k in FIRST_LAYERS:
+    branch = [k for k in (*BRANCH_FIRST_LAYERS, *BRANCH_INPUT) if k in tensors]
+    if branch and len(branch) != len(BRANCH_FIRST_LAYERS) + len(BRANCH_INPUT):
+        raise ValueError(f"{snap.path}: a standing branch without all of "
+                         f"{BRANCH_FIRST_LAYERS + BRANCH_INPUT} to widen")  # fmt: skip
+    for k in FIRST_LAYERS + (BRANCH_FIRST_LAYERS if branch else ()):
         tensors[k] = torch.from_numpy(_insert(tensors[k].numpy(), added, 0.0, axis=1))
+    for k, value in zip(BRANCH_INPUT, (1.0, 0.0), strict=True) if branch else ():
+        tensors[k] = torch.from_numpy(_insert(tensors[k].numpy(), added, value, axis=0))
     files = dict(snap.files)
     files[POLICY_FILE] = save({k: v.contiguous() for k, v in tensors.items()})
     if NORMALIZER_FILE in snap:
