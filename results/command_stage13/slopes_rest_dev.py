@@ -19,6 +19,6 @@ policy, norm, cfg, state = load_policy(sys.argv[1], sys.argv[2])
 seeds = list(range(700000, 700000 + (int(sys.argv[3]) if len(sys.argv) > 3 else 100)))
 act = policy_batch_actor(policy, norm, cfg)
 slopes = [(f"slope {deg:+.1f} deg", {"slope_rad": math.radians(deg)}) for deg in (-5, -2.5, 2.5, 5)]
-rows = cp._walk_rows(act, cfg.env_kwargs(), seeds, cfg.env_id, slopes)
+rows = cp.walk_rows(act, cfg.env_kwargs(), seeds, cfg.env_id, slopes)
 print(f"# {sys.argv[2]}/ at {state['num_timesteps']} env steps; {len(seeds)} development episodes")
 print(cp.markdown(rows), end="")

@@ -19,5 +19,5 @@ policy, norm, cfg, _ = load_policy(run, which)
 batch = policy_batch_actor(policy, norm, cfg)
 conds = [(f"slope {d:+.1f} deg", {"slope_rad": math.radians(d)}) for d in (2.5, 5.0)]
 seeds = list(range(700000, 700000 + n))
-for r in cp._walk_rows(batch, cfg.env_kwargs(), seeds, cfg.env_id, conds):
+for r in cp.walk_rows(batch, cfg.env_kwargs(), seeds, cfg.env_id, conds):
     print(which, r["row"], r["success"]["successes"], "/", n, r["ends"])

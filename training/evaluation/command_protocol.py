@@ -306,8 +306,10 @@ MODEL_CONDITIONS = (
 """The model's randomisation and the sensor noise of the robustness protocol, each alone."""
 
 
-def _walk_rows(act, env_kwargs, seeds, env_id, conditions, start=None) -> list[dict]:
+def walk_rows(act, env_kwargs, seeds, env_id, conditions, start=None) -> list[dict]:
     """The walking success at 1.0 m/s under each (label, perturbations) of ``conditions``.
+
+    The rows of :func:`slope_rows` and :func:`model_rows`; a study's own conditions the same way.
 
     ``start``: the episodes' start (None: the policy's own, ``env_kwargs``'s).
     """
@@ -334,13 +336,13 @@ def slope_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     for start, where in ((None, ""), ("midstride", " from mid-stride")):
         slopes = [(f"slope {deg:+.1f} deg{where}", {"slope_rad": math.radians(deg)})
                   for deg in SLOPES_DEG]  # fmt: skip
-        rows += _walk_rows(act, env_kwargs, seeds, env_id, slopes, start)
+        rows += walk_rows(act, env_kwargs, seeds, env_id, slopes, start)
     return rows
 
 
 def model_rows(act, env_kwargs, seeds, env_id) -> list[dict]:
     """Masses, K and sensor noise (:data:`MODEL_CONDITIONS`) at 1.0 m/s: the walking success."""
-    return _walk_rows(act, env_kwargs, seeds, env_id, MODEL_CONDITIONS)
+    return walk_rows(act, env_kwargs, seeds, env_id, MODEL_CONDITIONS)
 
 
 def push_figure(rows: list[dict], path) -> None:

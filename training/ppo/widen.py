@@ -57,8 +57,8 @@ def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.n
 
     The policy's first layers gain zero columns at ``added`` (a standing branch's too, its input
     map 1 and 0 there), the observation statistics ``mean`` and ``var`` there; every other file
-    is the snapshot's own. ValueError where the
-    snapshot's network has no such first layers (an in-network normaliser).
+    is the snapshot's own. ValueError where the snapshot's network has no such first layers (an
+    in-network normaliser) or only part of a standing branch.
     """
     import torch
     from safetensors.torch import save
