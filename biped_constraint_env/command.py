@@ -8,7 +8,8 @@ row holds a commanded forward speed [m/s], drawn at its start (zero with probabi
 simulated time (``resample_s=None``: one command per episode), from the row's own generator,
 after the start's and the perturbations' draws. The observation appends it (one entry,
 ``command_m_s``). A user sets it as a joystick would: ``env.unwrapped.set_command(v)`` (the
-batched env: one value per row), or ``reset(options={"command": v})``; a command set so holds
+batched env: one value per row), or ``reset(options={"command": v})`` (the batched env: one, or
+one per row); a command set so holds
 until the next reset (no resampling). ``deadband`` [m/s] (0: off) is a joystick's dead zone:
 every command, drawn or set, of size below it is held as exactly 0 (stop and stand), so the
 observation, the reward and ``info["command_m_s"]`` see the 0 (legged_gym zeroes its drawn
@@ -126,15 +127,23 @@ def check_command(value: Any) -> float:
     return check_real("command", value, -MAX_COMMAND_M_S, MAX_COMMAND_M_S, unit=" [m/s]")
 
 
-def split_reset_options(options: Any) -> tuple[Any, float | None]:
+def split_reset_options(options: Any, n: int | None = None) -> tuple[Any, Any]:
     """``reset(options=...)`` as (the start's options or None, the command or None).
 
-    ``{"command": v}`` alone draws the start as usual and holds the command ``v``.
+    ``{"command": v}`` alone draws the start as usual and holds the command ``v``. ``n``: the
+    batched env's rows, where ``v`` may also be one command per row (returned as an (n,) array).
     """
     if not isinstance(options, dict) or "command" not in options:
         return options, None
     rest = {k: v for k, v in options.items() if k != "command"}
-    return (rest or None), check_command(options["command"])
+    value = options["command"]
+    if n is None or np.ndim(value) == 0:
+        return (rest or None), check_command(value)
+    values = np.asarray(value)
+    if values.shape != (n,):
+        raise ValueError(f"reset option 'command' must be one value or one per row ({n}), "
+                         f"got shape {values.shape}")  # fmt: skip
+    return (rest or None), np.array([check_command(x) for x in values.tolist()])
 
 
 class Commands:
@@ -179,18 +188,21 @@ class Commands:
         lo, hi = self.s.resample_s
         return t + (lo if lo == hi else float(rng.uniform(lo, hi)))
 
-    def start(self, idx, rngs, t, given: float | None = None) -> None:
+    def start(self, idx, rngs, t, given=None) -> None:
         """New episodes in rows ``idx`` at times ``t`` (row ``idx[k]`` drawing from ``rngs[k]``).
 
-        ``given``: the command of ``reset(options={"command": v})``, held (nothing drawn).
+        ``given``: the command of ``reset(options={"command": v})``, one or one per row of
+        ``idx``, held (nothing drawn).
         """
         idx = np.asarray(idx)
+        if given is not None:
+            given = np.broadcast_to(np.asarray(given, dtype=np.float64), idx.shape)
         for k, i in enumerate(idx):
             if given is None:
                 self.goal[i] = self._draw(rngs[k])
                 self.next_t[i] = self._next(rngs[k], float(t[k]))
             else:
-                self.goal[i], self.next_t[i] = given, np.inf
+                self.goal[i], self.next_t[i] = given[k], np.inf
             self.t_last[i] = float(t[k])
         self._follow(idx)
 

@@ -144,7 +144,7 @@ class EnvCore:
         self._posture.flags.writeable = False
 
     # ------------------------------------------------------------------ starts
-    def draw_starts(self, idx: np.ndarray, rngs, command: float | None = None) -> None:
+    def draw_starts(self, idx: np.ndarray, rngs, command: float | np.ndarray | None = None) -> None:
         """Drawn starts of rows ``idx`` (row ``idx[k]`` from ``rngs[k]``), clocks started.
 
         With the reference, its reference-state starts and clock placement
@@ -162,7 +162,7 @@ class EnvCore:
         self.perturb.start(idx, rngs)
         self._start_commands(idx, rngs, command)
 
-    def _start_commands(self, idx, rngs, command: float | None) -> None:
+    def _start_commands(self, idx, rngs, command: float | np.ndarray | None) -> None:
         """The rows' commands: ``command`` held (``reset(options={"command": v})``) or drawn."""
         if self.commands is not None:
             self.commands.start(idx, rngs, self.sim.fst[idx, FS_T], command)
@@ -179,7 +179,7 @@ class EnvCore:
         return self.settings
 
     def set_starts(
-        self, idx: np.ndarray, state: SimState, rngs, command: float | None = None
+        self, idx: np.ndarray, state: SimState, rngs, command: float | np.ndarray | None = None
     ) -> None:
         """Rows ``idx`` start at the given (checked) ``state`` (``reset(options=...)``)."""
         p = self.settings.physics

@@ -360,6 +360,7 @@ class ConstrainedBipedEnv(gym.Env):
       frame: a slope is observed). Added: the ``command`` option's ``deadband`` and
       ``ramp_m_s2`` (both off by default; ``set_command`` returns the held command); the
       ``"stride_drift"`` start (the stride-stand posture drifting at -0.3 to 0.1 m/s).
+      Added: the batched env's ``reset(options={"command": v})`` takes one command per row too.
 
     Example:
         >>> import gymnasium as gym

@@ -99,7 +99,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         """The batch with its settings."""
         return f"ConstrainedBipedVectorEnv(num_envs={self.num_envs}, {self.settings!r})"
 
-    def _reset_rows(self, idx: np.ndarray, command: float | None = None) -> None:
+    def _reset_rows(self, idx: np.ndarray, command: float | np.ndarray | None = None) -> None:
         """Drawn starts for rows ``idx`` (each from its own generator, as the single env)."""
         self.core.draw_starts(idx, [self._rngs[i] for i in idx], command)
         self._elapsed[idx] = 0
@@ -129,7 +129,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         if seed is not None:
             seeds = check_seeds(seed, self.num_envs)
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        options, command = split_reset_options(options)
+        options, command = split_reset_options(options, self.num_envs)
         if options is not None and not (isinstance(options, dict) and not options):
             self.core.set_starts(self._all, state_from_options(options), self._rngs, command)
             self._elapsed[:] = 0

@@ -148,6 +148,29 @@ def test_a_user_sets_the_command_as_a_joystick_and_it_holds():
         gym.make("ConstrainedBiped-v0", reward="command")
 
 
+def test_the_batched_reset_takes_one_command_per_row_as_the_single_env_takes_each():
+    kw = {**KW, "command": {**KW["command"], "ramp_m_s2": 1.0, "deadband": 0.2}}
+    venv = _vec(3, **kw)
+    given = [0.0, 0.7, 1.9]
+    obs_v, info_v = venv.reset(seed=5, options={"command": np.array(given)})
+    assert obs_v[:, -1].tolist() == given == info_v["command_m_s"].tolist()  # no ramp at a start
+    single = gym.make("ConstrainedBiped-v0", **kw)
+    steps_v = [venv.step(np.zeros((3, 5)))[0] for _ in range(15)]  # past the resampling times
+    for row, v in enumerate(given):
+        obs, _ = single.reset(seed=5 + row, options={"command": v})
+        assert np.array_equal(obs, obs_v[row])  # the same start, drawn from the row's seed
+        for k in range(15):
+            obs = single.step(np.zeros(5))[0]
+            assert np.array_equal(obs, steps_v[k][row]) and obs[-1] == v  # held: none drawn
+    assert venv.reset(seed=5, options={"command": 0.7})[0][:, -1].tolist() == [0.7] * 3
+    with pytest.raises(ValueError, match="one per row"):
+        venv.reset(seed=5, options={"command": [0.5, 1.0]})
+    with pytest.raises(ValueError, match="command"):
+        venv.reset(seed=5, options={"command": [0.5, float("nan"), 1.0]})
+    with pytest.raises(ValueError, match="command"):
+        single.reset(seed=5, options={"command": [0.5]})  # the single env: one value
+
+
 def test_command_reward_follows_the_command_and_pays_standing_at_zero():
     s = make_settings(task="command")
     r = CommandReward(s.reward, s.dt, 2)
@@ -365,6 +388,11 @@ def test_protocol_measures_stride_speed_and_sets_commands_between_periods(monkey
     assert seen[0].tolist() == [0.5, 0.5] and all(e["command"][0] == 0.5 for e in eps)
     assert any(s.tolist() == [1.5, 1.5] for s in seen)  # changed when the time came
     assert all(len(e["t"]) == len(e["hip_y"]) for e in eps)
+    # with the joystick's ramp too, an episode starts at its command, not at the reset's draw
+    seen.clear()
+    cp.run_commanded(act, {"task": "command", "command": {"ramp_m_s2": 1.0}}, [0, 1],
+                     lambda tt, k: np.full(len(tt), 0.7), 0.1)  # fmt: skip
+    assert seen and all(s.tolist() == [0.7, 0.7] for s in seen)
     # the robustness rows at 1.0 m/s: each condition's perturbation reaches the env
     kw = []
     walked = [{"steps_completed": 20, "end": "time_limit"}]

@@ -58,6 +58,8 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
                   hook: Callable | None = None) -> list[dict]:  # fmt: skip
     """Episodes of ``seeds`` under ``command(t (n,), k) -> (n,)`` [m/s], set before every period.
 
+    Each episode starts at its command (``reset(options={"command": command(0, 0)})``): with
+    the joystick's ramp, the held command moves from there, not from a command the reset drew.
     Per episode: its steps, end, the hip's y and the time at every period, the step times, and
     the commands it ran under (lists, for the rows' measures). ``hook(core, live, step_t)``
     runs before every period (a push: it may change the rows' rates).
@@ -69,8 +71,9 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
     kw = with_keys(env_kwargs, "termination", time_limit_s=episode_s)
     venv = gym.make_vec(env_id, num_envs=len(seeds), vectorization_mode="vector_entry_point",
                         **kw)  # fmt: skip
-    obs, info = venv.reset(seed=[int(s) for s in seeds])
     n = len(seeds)
+    first = np.asarray(command(np.zeros(n), 0), dtype=float)  # every episode starts at t = 0
+    obs, info = venv.reset(seed=[int(s) for s in seeds], options={"command": first})
     live = np.ones(n, bool)
     hip = [[float(info["hip_y"][i])] for i in range(n)]
     ts = [[float(info["t"][i])] for i in range(n)]
