@@ -127,7 +127,9 @@ def check_command(value: Any) -> float:
     return check_real("command", value, -MAX_COMMAND_M_S, MAX_COMMAND_M_S, unit=" [m/s]")
 
 
-def split_reset_options(options: Any, n: int | None = None) -> tuple[Any, Any]:
+def split_reset_options(
+    options: Any, n: int | None = None
+) -> tuple[Any, float | np.ndarray | None]:
     """``reset(options=...)`` as (the start's options or None, the command or None).
 
     ``{"command": v}`` alone draws the start as usual and holds the command ``v``. ``n``: the
@@ -137,6 +139,8 @@ def split_reset_options(options: Any, n: int | None = None) -> tuple[Any, Any]:
         return options, None
     rest = {k: v for k, v in options.items() if k != "command"}
     value = options["command"]
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()  # numpy's 0-d array: one value
     if n is None or np.ndim(value) == 0:
         return (rest or None), check_command(value)
     values = np.asarray(value)
@@ -188,7 +192,7 @@ class Commands:
         lo, hi = self.s.resample_s
         return t + (lo if lo == hi else float(rng.uniform(lo, hi)))
 
-    def start(self, idx, rngs, t, given=None) -> None:
+    def start(self, idx, rngs, t, given: float | np.ndarray | None = None) -> None:
         """New episodes in rows ``idx`` at times ``t`` (row ``idx[k]`` drawing from ``rngs[k]``).
 
         ``given``: the command of ``reset(options={"command": v})``, one or one per row of

@@ -163,6 +163,12 @@ def test_the_batched_reset_takes_one_command_per_row_as_the_single_env_takes_eac
             obs = single.step(np.zeros(5))[0]
             assert np.array_equal(obs, steps_v[k][row]) and obs[-1] == v  # held: none drawn
     assert venv.reset(seed=5, options={"command": 0.7})[0][:, -1].tolist() == [0.7] * 3
+    assert venv.reset(seed=5, options={"command": np.float64(0.7)})[0][:, -1].tolist() == [0.7] * 3
+    assert venv.reset(seed=5, options={"command": np.array(0.7)})[0][:, -1].tolist() == [0.7] * 3
+    assert single.reset(seed=5, options={"command": np.array(0.7)})[0][-1] == 0.7
+    # with a given start state too: each row its command, the same state
+    obs_q, _ = venv.reset(seed=5, options={"command": given, "q": REST})
+    assert obs_q[:, -1].tolist() == given and np.array_equal(obs_q[0, :-1], obs_q[2, :-1])
     with pytest.raises(ValueError, match="one per row"):
         venv.reset(seed=5, options={"command": [0.5, 1.0]})
     with pytest.raises(ValueError, match="command"):

@@ -58,7 +58,7 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
                   hook: Callable | None = None) -> list[dict]:  # fmt: skip
     """Episodes of ``seeds`` under ``command(t (n,), k) -> (n,)`` [m/s], set before every period.
 
-    Each episode starts at its command (``reset(options={"command": command(0, 0)})``): with
+    Each episode starts at its command (``reset(options={"command": command(t=0, k=0)})``): with
     the joystick's ramp, the held command moves from there, not from a command the reset drew.
     Per episode: its steps, end, the hip's y and the time at every period, the step times, and
     the commands it ran under (lists, for the rows' measures). ``hook(core, live, step_t)``
@@ -72,7 +72,7 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
     venv = gym.make_vec(env_id, num_envs=len(seeds), vectorization_mode="vector_entry_point",
                         **kw)  # fmt: skip
     n = len(seeds)
-    first = np.asarray(command(np.zeros(n), 0), dtype=float)  # every episode starts at t = 0
+    first = np.broadcast_to(np.asarray(command(np.zeros(n), 0), dtype=float), (n,))  # t = 0
     obs, info = venv.reset(seed=[int(s) for s in seeds], options={"command": first})
     live = np.ones(n, bool)
     hip = [[float(info["hip_y"][i])] for i in range(n)]
