@@ -273,7 +273,8 @@ def command_speed_term(r, p) -> np.ndarray:
     """
     moving = p.command != 0.0
     still = np.where(p.modes == STAND_MODEL, kernel(r, "speed", p.speed), STEP_TO_STAND)
-    return np.where(moving, speed_term(r, p), still)
+    walk = speed_term(r, p) if p.avg_speed is None else kernel(r, "speed", p.avg_speed - p.command)
+    return np.where(moving, walk, still)
 
 
 def command_effort_term(r, p) -> np.ndarray:
@@ -375,6 +376,36 @@ class CommandReward(GaitReward):
     """
 
     KIND = "command"
+
+    def __init__(self, reward, dt: float, n: int):
+        """As :class:`~.gait.GaitReward`, with the rows' average speeds (``speed_window_s``)."""
+        super().__init__(reward, dt, n)
+        self.window_s = reward.speed_window_s
+        self.avg = np.zeros(n)
+        """The rows' hip speeds averaged over ``window_s`` [m/s] (where it is set)."""
+        self._fresh = np.ones(n, dtype=bool)
+
+    def start(self, idx) -> None:
+        """Rows ``idx`` start: their averages begin at their first period's mean speed."""
+        self._fresh[idx] = True
+
+    def average_speed(self, progress_m: np.ndarray, skip=None) -> np.ndarray | None:
+        """(n,): the rows' averaged hip speeds after a period (None without a window).
+
+        avg += (1 - exp(-dt / window)) (progress / dt - avg), begun at a row's first period's
+        mean speed; rows in ``skip`` (not stepped) keep theirs.
+        """
+        if self.window_s is None:
+            return None
+        speed = progress_m / self.dt
+        rate = -np.expm1(-self.dt / self.window_s)
+        new = np.where(self._fresh, speed, self.avg + rate * (speed - self.avg))
+        stepped = np.ones(len(new), dtype=bool)
+        if skip is not None:
+            stepped[skip] = False
+        self.avg = np.where(stepped, new, self.avg)
+        self._fresh &= ~stepped
+        return self.avg
 
     @staticmethod
     def start_toe_force(core) -> np.ndarray:

@@ -163,9 +163,14 @@ class EnvCore:
         self._start_commands(idx, rngs, command)
 
     def _start_commands(self, idx, rngs, command: float | np.ndarray | None) -> None:
-        """The rows' commands: ``command`` held (``reset(options={"command": v})``) or drawn."""
+        """The rows' commands: ``command`` held (``reset(options={"command": v})``) or drawn.
+
+        The command reward's speed averages begin again for these rows.
+        """
         if self.commands is not None:
             self.commands.start(idx, rngs, self.sim.fst[idx, FS_T], command)
+        if self.command_reward is not None:
+            self.command_reward.start(idx)
         elif command is not None:
             raise ValueError("reset option 'command' needs an env with a command "
                              "(task='command' or the command option)")  # fmt: skip

@@ -210,9 +210,9 @@ class ConstrainedBipedEnv(gym.Env):
     | | | "stride_drift", "nudge", "reference" (recorded reference states) |
     | reward | "env" | "env" (Rewards), "tracking" (a reference walk's; below), "gait" (the task |
     | | | and the contact clock, no recording; below), "command", or {"kind", "weights", |
-    | | | "kernels", "targets", "gated", "first_phase_s"}: any term's weight, kernel or |
-    | | | target; the cadence target of a start near rest's first contact phase [s] |
-    | | | (:mod:`.rewards`) |
+    | | | "kernels", "targets", "gated", "first_phase_s", "speed_window_s"}: any term's |
+    | | | weight, kernel or target; the cadence target of a start near rest's first |
+    | | | contact phase [s]; the command reward's speed averaging time [s] (:mod:`.rewards`) |
     | termination | {} | dict: "fall_hip_height_m" (None: end when the hip is below [m]), |
     | | | "max_model_time_s" (None: end when one model has lasted longer [s]), |
     | | | "max_first_phase_s" (None: end when a start near rest's first model lasts longer [s]), |
@@ -361,6 +361,8 @@ class ConstrainedBipedEnv(gym.Env):
       ``ramp_m_s2`` (both off by default; ``set_command`` returns the held command); the
       ``"stride_drift"`` start (the stride-stand posture drifting at -0.3 to 0.1 m/s).
       Added: the batched env's ``reset(options={"command": v})`` takes one command per row too.
+      Added: the command reward's ``speed_window_s`` (off by default): while a speed is
+      commanded its ``speed`` term reads the hip speed averaged over that time constant.
 
     Example:
         >>> import gymnasium as gym

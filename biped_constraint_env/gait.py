@@ -46,7 +46,8 @@ class Period:
     ``first_phase``: the rows still in a start near rest's first contact phase (None: none);
     ``switches``: forward model switches in it (None: not recorded); ``contact_fn``: the point
     contact's normal force at its start under its torques [N], NaN where not computed (None:
-    not computed at all).
+    not computed at all); ``avg_speed``: the hip speed averaged over the command reward's
+    ``speed_window_s`` [m/s] (None: off).
     """
 
     speed: np.ndarray
@@ -60,6 +61,7 @@ class Period:
     first_phase: np.ndarray | None = None
     switches: np.ndarray | None = None
     contact_fn: np.ndarray | None = None
+    avg_speed: np.ndarray | None = None
 
 
 def kernel(reward, name: str, error) -> np.ndarray:
@@ -163,7 +165,8 @@ class GaitReward:
         self._live = [c for c, t in enumerate(self.specs) if t.per_period]
 
     def terms(self, progress_m, hip_z, swing_vy, modes, model_time_s, steps, alive, command=None,
-              tau_sq=None, first_phase=None, switches=None, contact_fn=None):  # fmt: skip
+              tau_sq=None, first_phase=None, switches=None, contact_fn=None,
+              avg_speed=None):  # fmt: skip
         """(n, k + 1): the terms (the kind's order) and their sum, after a period.
 
         ``progress_m``: the hip's forward progress in the period [m]; ``alive``: periods not
@@ -171,7 +174,7 @@ class GaitReward:
         rest as :class:`Period`'s.
         """
         p = Period(progress_m / self.dt, hip_z, swing_vy, modes, model_time_s, steps, command,
-                   tau_sq, first_phase, switches, contact_fn)  # fmt: skip
+                   tau_sq, first_phase, switches, contact_fn, avg_speed)  # fmt: skip
         out = np.empty((len(progress_m), len(self.specs) + 1))
         gate = None
         for c, t in enumerate(self.specs):

@@ -106,6 +106,11 @@ class RewardSettings:
     first_phase_s: float | None = None
     """The gait and command rewards: the cadence target of a start near rest's first contact phase
     [s] (None: its model's target)."""
+    speed_window_s: float | None = None
+    """The command reward: its ``speed`` term measures the hip speed averaged over this time
+    constant [s] (an exponential average of the periods' mean speeds, begun at each start)
+    while a speed is commanded, so a slow walk may pause in double support between steps
+    (None: each period's own mean speed)."""
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -143,6 +148,8 @@ class RewardSettings:
             out["gated"] = True
         if self.first_phase_s is not None:
             out["first_phase_s"] = self.first_phase_s
+        if self.speed_window_s is not None:
+            out["speed_window_s"] = self.speed_window_s
         return out
 
 
@@ -150,13 +157,13 @@ def reward_settings(reward: Any) -> RewardSettings:
     """The ``reward`` kwarg: a kind's name or ``{"kind", "weights", "kernels", ...}``.
 
     The dict's other keys: ``"targets"`` (the gait reward's), ``"gated"`` (the gait
-    reward's task terms gated by the cadence kernel) and ``"first_phase_s"`` (the gait and
-    command rewards: the cadence target of a start near rest's first contact phase [s]).
+    reward's task terms gated by the cadence kernel), ``"first_phase_s"`` (the gait and
+    command rewards: the cadence target of a start near rest's first contact phase [s]) and
+    ``"speed_window_s"`` (the command reward: the ``speed`` term's averaging time [s]).
     """
     spec = {"kind": reward} if isinstance(reward, str) else reward
-    check_mapping(
-        "reward", spec, ("kind", "weights", "kernels", "targets", "gated", "first_phase_s")
-    )
+    check_mapping("reward", spec, ("kind", "weights", "kernels", "targets", "gated",
+                                   "first_phase_s", "speed_window_s"))  # fmt: skip
     kind = check_choice("reward kind", spec.get("kind", "env"), sorted(REWARD_KINDS))
     terms = REWARD_KINDS[kind]
     names = [t.name for t in terms]
@@ -187,9 +194,16 @@ def reward_settings(reward: Any) -> RewardSettings:
             raise ValueError(f"reward 'first_phase_s' is a setting of the 'gait' and 'command' "
                              f"rewards, not {kind!r}'s")  # fmt: skip
         first = check_real("reward 'first_phase_s'", first, 0.0, 1e3, unit=" [s]")
+    window = spec.get("speed_window_s")
+    if window is not None:
+        if kind != "command":
+            raise ValueError(f"reward 'speed_window_s' is a setting of the 'command' reward, "
+                             f"not {kind!r}'s")  # fmt: skip
+        window = check_real("reward 'speed_window_s'", window, 0.0, 1e3, low_open=True,
+                            unit=" [s]")  # fmt: skip
     return RewardSettings(kind, tuple(weights[n] for n in names),
                           tuple(kernels[n] for n in names),
-                          tuple(targets[n] for n in names), gated, first)  # fmt: skip
+                          tuple(targets[n] for n in names), gated, first, window)  # fmt: skip
 
 
 def _target(name: str, value: Any, per_model: bool) -> float | tuple[float, ...]:
@@ -361,14 +375,16 @@ class CommandRewardPart:
         """(terms, rewards) of the period against the command it ran under."""
         command, contact_fn = snap
         rec, sim = core.buf.rew, core.sim
-        out = core.command_reward.terms(rec[:, REC_PROGRESS], core.hip[:, 1],
+        reward = core.command_reward
+        avg = reward.average_speed(rec[:, REC_PROGRESS], skip)
+        out = reward.terms(rec[:, REC_PROGRESS], core.hip[:, 1],
                                         rec[:, REC_SWING_VY], sim.ist[:, ST_MODE],
                                         core.clock.model_time_s(), rec[:, REC_STEPS],
                                         ~terminated, command,
                                         tau_sq=rec[:, REC_TAU_SQ],
                                         first_phase=core.clock.opening,
                                         switches=rec[:, REC_SWITCHES],
-                                        contact_fn=contact_fn)  # fmt: skip
+                                        contact_fn=contact_fn, avg_speed=avg)  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1]

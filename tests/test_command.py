@@ -219,6 +219,92 @@ def test_command_reward_follows_the_command_and_pays_standing_at_zero():
         assert np.allclose(out[:, -1], out[:, :-1].sum(axis=1))
 
 
+def test_the_speed_window_averages_each_rows_periods_from_its_start():
+    """``speed_window_s``: while moving is commanded the speed term reads the rows' exponential
+    average of their periods' mean speeds, begun at each start; rows not stepped keep theirs;
+    a zero command still reads the period's own speed."""
+    s = make_settings(task="command", reward={"kind": "command", "speed_window_s": 0.5,
+                                              "kernels": {"speed": 16.0}})  # fmt: skip
+    assert s.reward.speed_window_s == 0.5 and s.reward.as_dict()["speed_window_s"] == 0.5
+    r = CommandReward(s.reward, s.dt, 3)
+    a = 1.0 - np.exp(-s.dt / 0.5)
+    v = [np.array([0.2, 0.4, 1.0]), np.array([0.6, 0.0, 3.0]), np.array([1.0, 1.0, 1.0])]
+    assert np.allclose(r.average_speed(v[0] * s.dt), v[0])  # begun at the first period's speed
+    avg = r.average_speed(v[1] * s.dt, skip=np.array([2]))  # row 2 not stepped: kept
+    want = np.array([0.2 + a * 0.4, 0.4 - a * 0.4, 1.0])
+    assert np.allclose(avg, want)
+    r.start(np.array([1]))  # row 1 starts again
+    avg = r.average_speed(v[2] * s.dt)
+    want = np.array([want[0] + a * (1.0 - want[0]), 1.0, 1.0])
+    assert np.allclose(avg, want)
+    args = dict(hip_z=np.full(3, 2.95), swing_vy=np.ones(3), modes=np.full(3, 4),
+                model_time_s=np.full(3, 0.05), steps=np.zeros(3), alive=np.ones(3, bool),
+                tau_sq=np.zeros(3))  # fmt: skip
+    out = r.terms(v[2] * s.dt, command=np.array([0.5, 0.0, 1.0]), avg_speed=avg, **args)
+    assert out[:, 0] == pytest.approx([0.4 * np.exp(-16 * (want[0] - 0.5) ** 2),
+                                       0.4 * np.exp(-16 * 1.0), 0.4])  # fmt: skip
+    assert (
+        CommandReward(make_settings(task="command").reward, s.dt, 3).average_speed(np.zeros(3))
+        is None
+    )  # off by default
+    for bad, match in (
+        ({"kind": "gait", "speed_window_s": 1.0}, "'command' reward"),
+        ({"kind": "command", "speed_window_s": 0.0}, "speed_window_s"),
+        ({"kind": "command", "speed_window_s": "1"}, "speed_window_s"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            make_settings(task="command", reward=bad)
+
+
+def test_the_speed_window_is_paid_alike_in_both_envs_and_begins_again_at_an_autoreset():
+    """The committed command policy from rest at 1.0 m/s with a 1 s window: the single and the
+    batched env pay the same speed term, the average of the hip's periods (from ``hip_y``) by
+    hand; a row the batched env starts again pays its first period's own speed."""
+    from training.ppo.policy_io import load_policy, policy_batch_actor
+
+    policy, norm, cfg, _ = load_policy(POLICY)
+    walker = policy_batch_actor(policy, norm, cfg)
+    reward = {
+        "kind": "command",
+        "speed_window_s": 1.0,
+        "kernels": {"speed": 16.0},
+        "gated": False,
+    }  # the speed term alone (not times the cadence kernel)
+    kw = {**cfg.env_kwargs(), "start": "rest", "reward": reward,
+          "command": {"resample_s": None, "zero_fraction": 0.0}}  # fmt: skip
+    single = gym.make(cfg.env_id, **kw)
+    venv = _vec(1, **kw)
+    obs, info = single.reset(seed=700001, options={"command": 1.0})
+    obs_v, _ = venv.reset(seed=700001, options={"command": 1.0})
+    dt, k = single.unwrapped.settings.dt, 16.0
+    avg, y = None, info["hip_y"]
+    for _ in range(60):
+        a = walker(obs[None, :])[0]
+        obs, _, term, trunc, info = single.step(a)
+        _, _, _, _, info_v = venv.step(a[None, :])
+        v = (info["hip_y"] - y) / dt
+        y = info["hip_y"]
+        avg = v if avg is None else avg + (1.0 - np.exp(-dt / 1.0)) * (v - avg)
+        assert info["reward_speed"] == info_v["reward_speed"][0]
+        assert info["reward_speed"] == pytest.approx(0.4 * np.exp(-k * (avg - 1.0) ** 2), rel=1e-9)
+        assert not (term or trunc)
+    # a zero action from rest falls; the batched row starts again and its average with it
+    venv = _vec(1, **{**kw, "start": "rest"})
+    venv.reset(seed=3, options={"command": 1.0})
+    for _ in range(400):
+        _, _, term, trunc, info_v = venv.step(np.zeros((1, 5)))
+        if term[0] or trunc[0]:
+            break
+    assert term[0] or trunc[0]
+    venv.step(np.zeros((1, 5)))  # the autoreset period: the row starts again
+    y = venv.unwrapped.core.hip[0, 0]
+    _, _, _, _, info_v = venv.step(np.zeros((1, 5)))
+    v = (info_v["hip_y"][0] - y) / dt
+    cmd = info_v["command_m_s"][0]
+    assert cmd > 0.0 and info_v["steps_completed"][0] == 0  # drawn, never zero here
+    assert info_v["reward_speed"][0] == pytest.approx(0.4 * np.exp(-k * (v - cmd) ** 2), rel=1e-9)
+
+
 def test_the_hold_term_pays_a_whole_period_in_double_support_at_a_zero_command():
     s = make_settings(task="command")
     args = dict(hip_z=np.full(4, 2.95), swing_vy=np.ones(4), model_time_s=np.full(4, 0.04),
