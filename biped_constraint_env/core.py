@@ -169,11 +169,11 @@ class EnvCore:
         """
         if self.commands is not None:
             self.commands.start(idx, rngs, self.sim.fst[idx, FS_T], command)
-        if self.command_reward is not None:
-            self.command_reward.start(idx)
         elif command is not None:
             raise ValueError("reset option 'command' needs an env with a command "
                              "(task='command' or the command option)")  # fmt: skip
+        if self.command_reward is not None:
+            self.command_reward.start(idx)
 
     def set_start_kind(self, start: str | dict) -> EnvSettings:
         """Later starts of every row are drawn from ``start`` (:func:`~.settings.with_start_kind`).

@@ -377,14 +377,11 @@ class CommandRewardPart:
         rec, sim = core.buf.rew, core.sim
         reward = core.command_reward
         avg = reward.average_speed(rec[:, REC_PROGRESS], skip)
-        out = reward.terms(rec[:, REC_PROGRESS], core.hip[:, 1],
-                                        rec[:, REC_SWING_VY], sim.ist[:, ST_MODE],
-                                        core.clock.model_time_s(), rec[:, REC_STEPS],
-                                        ~terminated, command,
-                                        tau_sq=rec[:, REC_TAU_SQ],
-                                        first_phase=core.clock.opening,
-                                        switches=rec[:, REC_SWITCHES],
-                                        contact_fn=contact_fn, avg_speed=avg)  # fmt: skip
+        out = reward.terms(rec[:, REC_PROGRESS], core.hip[:, 1], rec[:, REC_SWING_VY],
+                           sim.ist[:, ST_MODE], core.clock.model_time_s(), rec[:, REC_STEPS],
+                           ~terminated, command, tau_sq=rec[:, REC_TAU_SQ],
+                           first_phase=core.clock.opening, switches=rec[:, REC_SWITCHES],
+                           contact_fn=contact_fn, avg_speed=avg)  # fmt: skip
         if skip is not None:
             out[skip] = 0.0
         return out[:, :-1], out[:, -1]

@@ -8,6 +8,7 @@ import pytest
 
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.command import CommandReward, Commands, CommandSettings
+from biped_constraint_env.rewards import reward_settings
 from biped_constraint_env.settings import make_settings
 
 POLICY = Path(__file__).resolve().parents[1] / "policies" / "ppo_command_50hz"
@@ -225,7 +226,7 @@ def test_the_speed_window_averages_each_rows_periods_from_its_start():
     a zero command still reads the period's own speed."""
     s = make_settings(task="command", reward={"kind": "command", "speed_window_s": 0.5,
                                               "kernels": {"speed": 16.0}})  # fmt: skip
-    assert s.reward.speed_window_s == 0.5 and s.reward.as_dict()["speed_window_s"] == 0.5
+    assert s.reward.speed_window_s == 0.5 and reward_settings(s.reward.as_dict()) == s.reward
     r = CommandReward(s.reward, s.dt, 3)
     a = 1.0 - np.exp(-s.dt / 0.5)
     v = [np.array([0.2, 0.4, 1.0]), np.array([0.6, 0.0, 3.0]), np.array([1.0, 1.0, 1.0])]
@@ -288,21 +289,27 @@ def test_the_speed_window_is_paid_alike_in_both_envs_and_begins_again_at_an_auto
         assert info["reward_speed"] == info_v["reward_speed"][0]
         assert info["reward_speed"] == pytest.approx(0.4 * np.exp(-k * (avg - 1.0) ** 2), rel=1e-9)
         assert not (term or trunc)
-    # a zero action from rest falls; the batched row starts again and its average with it
-    venv = _vec(1, **{**kw, "start": "rest"})
-    venv.reset(seed=3, options={"command": 1.0})
-    for _ in range(400):
-        _, _, term, trunc, info_v = venv.step(np.zeros((1, 5)))
-        if term[0] or trunc[0]:
-            break
-    assert term[0] or trunc[0]
-    venv.step(np.zeros((1, 5)))  # the autoreset period: the row starts again
-    y = venv.unwrapped.core.hip[0, 0]
-    _, _, _, _, info_v = venv.step(np.zeros((1, 5)))
-    v = (info_v["hip_y"][0] - y) / dt
-    cmd = info_v["command_m_s"][0]
-    assert cmd > 0.0 and info_v["steps_completed"][0] == 0  # drawn, never zero here
-    assert info_v["reward_speed"][0] == pytest.approx(0.4 * np.exp(-k * (v - cmd) ** 2), rel=1e-9)
+    # a zero action from rest falls; the batched row starts again and its average with it,
+    # in either autoreset mode (NEXT_STEP: a period that skips the row, then its first)
+    from gymnasium.vector import AutoresetMode
+
+    for mode in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        venv = _vec(1, autoreset_mode=mode, **kw)
+        venv.reset(seed=3, options={"command": 1.0})
+        for _ in range(400):
+            _, _, term, trunc, info_v = venv.step(np.zeros((1, 5)))
+            if term[0] or trunc[0]:
+                break
+        assert term[0] and not trunc[0]
+        if mode == AutoresetMode.NEXT_STEP:
+            venv.step(np.zeros((1, 5)))  # the autoreset period: the row starts again
+        y = venv.unwrapped.core.hip[0, 0]
+        _, _, _, _, info_v = venv.step(np.zeros((1, 5)))
+        v = (info_v["hip_y"][0] - y) / dt
+        cmd = info_v["command_m_s"][0]
+        assert cmd > 0.0 and info_v["steps_completed"][0] == 0  # drawn, never zero here
+        assert info_v["reward_speed"][0] == pytest.approx(0.4 * np.exp(-k * (v - cmd) ** 2),
+                                                          rel=1e-9)  # fmt: skip
 
 
 def test_the_hold_term_pays_a_whole_period_in_double_support_at_a_zero_command():
