@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from training.evaluation.command_protocol import HOLD_S, STOP_WITHIN_S, stands
+from training.evaluation.command_protocol import HOLD_S, STOP_WITHIN_S, period_speeds, stands
 from training.evaluation.stop_feasibility import KD, KP, _at, rollout
 
 T = np.arange(1, 601) * 0.02  # period ends over 12 s
@@ -35,6 +35,14 @@ def test_stands_needs_rest_within_the_window_held_and_the_episode_running():
     # never at rest: the drift is infinite
     ok, drift = stands(T, np.full_like(T, 0.3), t0, T[-1])
     assert not ok and drift == np.inf
+
+
+def test_a_period_of_no_duration_has_no_speed_and_is_not_a_rest():
+    # a walk at 1 m/s with an env step that ended at a switch at its own start (t repeated)
+    t = np.array([0.0, 0.02, 0.04, 0.04, 0.06])
+    t_end, v = period_speeds({"t": t, "hip_y": t * 1.0})
+    np.testing.assert_allclose(t_end, [0.02, 0.04, 0.06])
+    np.testing.assert_allclose(v, 1.0)
 
 
 def test_knots_are_linear_between_and_held_after_the_span():

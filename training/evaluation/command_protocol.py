@@ -115,9 +115,15 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
 
 
 def period_speeds(ep: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(t at each period's end, the period's mean hip speed [m/s])."""
+    """(t at each period's end, the period's mean hip speed [m/s]).
+
+    A period of no duration (an env step that ended at a contact switch at its start) has no
+    speed and is left out: it would read as at rest (0 m/s) in the middle of a walk.
+    """
     t, y = np.asarray(ep["t"]), np.asarray(ep["hip_y"])
-    return t[1:], np.diff(y) / np.maximum(np.diff(t), 1e-12)
+    dt = np.diff(t)
+    keep = dt > 0.0
+    return t[1:][keep], np.diff(y)[keep] / dt[keep]
 
 
 def stride_errors(ep: dict, command: float, settle_s: float = SETTLE_S) -> list[float]:
