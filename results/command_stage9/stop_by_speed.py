@@ -45,8 +45,11 @@ for k in np.argsort(walk):
     t, v = cp.period_speeds(ep)
     ok = cp.stands(t, v, cp.STOP_AT_S, ep["t"][-1])[0]
     stood.append((walk[k], ok))
-    calm = [a for a in t[(t > cp.STOP_AT_S) & (t <= restart_at)]
-            if np.all(np.abs(v[(t >= a) & (t <= a + REST_S)]) < cp.STAND_SPEED_M_S)]
+    calm = [
+        a
+        for a in t[(t > cp.STOP_AT_S) & (t <= restart_at)]
+        if np.all(np.abs(v[(t >= a) & (t <= a + REST_S)]) < cp.STAND_SPEED_M_S)
+    ]
     rest = f"at rest {REST_S} s from {calm[0]:.2f} s" if calm else f"never at rest {REST_S} s"
     print(f"{ep['seed']} walk {walk[k]:.2f} m/s, {np.interp(cp.STOP_AT_S, t, v):.2f} m/s at the "
           f"stop; stood {int(ok)}; {rest}; {ep['end']} at {ep['t'][-1]:.2f} s")  # fmt: skip
