@@ -227,7 +227,8 @@ def start_dict(spec: Any) -> dict[str, Any]:
 def with_keys(kwargs: dict[str, Any], part: str, **keys: Any) -> dict[str, Any]:
     """The env's keyword arguments ``kwargs`` with ``keys`` set inside the dict of ``part``.
 
-    For the dict parts (``physics``, ``start``, ``termination``, ``action``, ``perturbations``):
+    For the dict parts (``physics``, ``start``, ``termination``, ``action``, ``perturbations``,
+    ``command``):
     ``with_keys(kw, "termination", time_limit_s=None)`` keeps the part's other keys.
     """
     cur = kwargs.get(part)
@@ -235,7 +236,7 @@ def with_keys(kwargs: dict[str, Any], part: str, **keys: Any) -> dict[str, Any]:
         base = start_dict(cur)
     elif part == "action":
         base = {} if cur is None else ({"kind": cur} if isinstance(cur, str) else dict(cur))
-    elif part in ("physics", "termination", "perturbations"):
+    elif part in ("physics", "termination", "perturbations", "command"):
         base = {} if cur is None else dict(cur)
     else:
         raise ValueError(f"with_keys: {part!r} is not a dict part of the env")

@@ -9,7 +9,7 @@ import pytest
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.command import CommandReward, Commands, CommandSettings
 from biped_constraint_env.rewards import reward_settings
-from biped_constraint_env.settings import make_settings
+from biped_constraint_env.settings import make_settings, with_keys
 
 POLICY = Path(__file__).resolve().parents[1] / "policies" / "ppo_command_50hz"
 
@@ -515,3 +515,11 @@ def test_protocol_measures_stride_speed_and_sets_commands_between_periods(monkey
         "sensor noise 0.005 rad, 0.05 rad/s, 1.0 m/s",
     ]
     assert all(r["success"]["rate"] == 1.0 for r in rows)
+
+
+def test_with_keys_sets_joystick_options_inside_the_command_and_keeps_the_rest():
+    kw = {"task": "command", "command": {"range": (0.0, 1.0)}}
+    out = with_keys(kw, "command", deadband=0.2, ramp_m_s2=1.0)
+    assert out["command"] == {"range": (0.0, 1.0), "deadband": 0.2, "ramp_m_s2": 1.0}
+    assert kw["command"] == {"range": (0.0, 1.0)}  # the caller's dict is not changed
+    assert with_keys({"task": "command"}, "command", deadband=0.1)["command"] == {"deadband": 0.1}

@@ -12,6 +12,7 @@ import sys
 
 import torch
 
+from biped_constraint_env.settings import with_keys
 from training.evaluation import command_protocol as cp
 from training.ppo.policy_io import load_policy, policy_batch_actor
 
@@ -20,8 +21,7 @@ policy, norm, cfg, state = load_policy(sys.argv[1], sys.argv[2])
 joystick = {"deadband": float(sys.argv[3])}
 if len(sys.argv) > 4 and float(sys.argv[4]) > 0:
     joystick["ramp_m_s2"] = float(sys.argv[4])
-kw = cfg.env_kwargs()
-kw["command"] = {**(kw.get("command") or {}), **joystick}
+kw = with_keys(cfg.env_kwargs(), "command", **joystick)
 first = int(sys.argv[6]) if len(sys.argv) > 6 else 700000
 seeds = list(range(first, first + (int(sys.argv[5]) if len(sys.argv) > 5 else 20)))
 rows = cp.run_protocol(policy_batch_actor(policy, norm, cfg), kw, seeds, cfg.env_id)

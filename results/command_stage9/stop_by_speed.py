@@ -14,6 +14,7 @@ import sys
 import numpy as np
 import torch
 
+from biped_constraint_env.settings import with_keys
 from training.evaluation import command_protocol as cp
 from training.ppo.policy_io import load_policy, policy_batch_actor
 
@@ -24,9 +25,8 @@ seeds = list(range(700000, 700000 + n))
 walk = np.random.default_rng(seeds[0]).uniform(0.3, 2.0, n)  # the draw of stop_rows
 kw = cfg.env_kwargs()
 if len(sys.argv) > 5:
-    kw["command"] = {**(kw.get("command") or {}), "deadband": float(sys.argv[4])}
-    if float(sys.argv[5]) > 0:
-        kw["command"]["ramp_m_s2"] = float(sys.argv[5])
+    ramp = {"ramp_m_s2": float(sys.argv[5])} if float(sys.argv[5]) > 0 else {}
+    kw = with_keys(kw, "command", deadband=float(sys.argv[4]), **ramp)
 REST_S = 0.5  # "at rest": every period's mean hip speed below the stand speed for this long [s]
 restart_at = cp.STOP_AT_S + cp.STOP_WITHIN_S + cp.HOLD_S
 
