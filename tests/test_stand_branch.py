@@ -154,6 +154,9 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"stand_branch_from": "x", **COMMAND}, "goes with --stand-branch and --init-from"),
         ({"stand_branch": True, "stand_branch_from": "x", **COMMAND}, "--init-from"),
         ({"stand_branch_frozen": True, **COMMAND}, "goes with --stand-branch"),
+        ({"walker_frozen": True, **COMMAND}, "--walker-frozen goes with --stand-branch"),
+        ({"stand_branch": True, "walker_frozen": True, "stand_branch_frozen": True, **COMMAND},
+         "no actor"),
         ({"stand_gamma": 0.99, **COMMAND}, "--stand-gamma goes with --stand-branch"),
         ({"stand_branch": True, "stand_gamma": 1.0, **COMMAND}, "below 1"),
         ({"stand_branch": True, "stand_gamma_rows": "zero_command", **COMMAND},
@@ -341,7 +344,22 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
             assert same, name
         elif name in ("value_net.weight", "action_net.weight"):
             assert not same, name  # the test could fail: the rest learned
-    # a later stage from it keeps its branch and needs the option
+    # a stage with the walker's actor frozen (standing starts at a zero command: branch rows):
+    # it stays as it was; the branch and the critics learn
+    rc = train_ppo.main([*flags, "--learning-rate", "1e-2", "--out-dir", str(tmp_path / "w"),
+                         "--init-from", str(run), "--stand-branch", "--walker-frozen",
+                         "--train-env", "start={stand = 1.0}", "--train-env",
+                         "command={range = [0.0, 2.0], zero_fraction = 1.0}"])  # fmt: skip
+    assert rc == 0
+    (still,) = (tmp_path / "w" / "train_ppo").iterdir()
+    after, _, _, _ = load_policy(still, "final")
+    walker_names = ("mlp_extractor.policy_net.", "action_net.", "log_std")
+    for name, v in after.state_dict().items():
+        same = torch.equal(v, policy.state_dict()[name])
+        if name.startswith(walker_names):
+            assert same, name
+        elif name in ("value_net.weight", "branch_value.weight", "branch_action.weight"):
+            assert not same, name  # the test could fail: the rest learned
     rc = train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(run),
                          "--stand-branch"])  # fmt: skip
     assert rc == 0

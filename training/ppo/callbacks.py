@@ -36,14 +36,15 @@ PPO_CKPT = "checkpoints/latest"
 def critic_warmup(cfg: PPOConfig, anchor=None):
     """A callback: the actor frozen for the first ``cfg.critic_warmup`` rollouts.
 
-    The actor: the walker's, and a standing branch's unless ``stand_branch_frozen`` holds it
-    frozen for the whole run (:func:`training.ppo.stand_branch.actor_parameters`).
+    The actor: the walker's unless ``walker_frozen`` holds it frozen for the whole run, and a
+    standing branch's unless ``stand_branch_frozen`` does
+    (:func:`training.ppo.stand_branch.actor_parameters`).
     With ``anchor`` (an :class:`training.ppo.imitation.Anchor`) it also takes
     ``cfg.bc_anchor_steps`` behaviour-cloning steps after every PPO update.
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from training.ppo.stand_branch import actor_parameters
+    from training.ppo.stand_branch import actor_parameters, walker_parameters
 
     class CriticWarmup(BaseCallback):
         def __init__(self):
@@ -66,12 +67,8 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
             p = self.model.policy
             frozen = self.rollouts <= cfg.critic_warmup
             branch = [] if cfg.stand_branch_frozen else actor_parameters(p)  # frozen: stays so
-            for param in [
-                *p.mlp_extractor.policy_net.parameters(),
-                *p.action_net.parameters(),
-                p.log_std,
-                *branch,
-            ]:
+            walker = [] if cfg.walker_frozen else walker_parameters(p)
+            for param in [*walker, *branch]:
                 param.requires_grad_(not frozen)
 
     return CriticWarmup()

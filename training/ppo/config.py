@@ -128,6 +128,9 @@ class PPOConfig:
     # observation statistics then stay the start's (the returns' still move)
     stand_branch_frozen: bool = False  # with stand_branch: the branch's actor does not learn
     # (its critic does): a stage in which only the walker learns to hand over to it
+    walker_frozen: bool = False  # with stand_branch: the walker's actor (its MLP, head and
+    # learned std) does not learn (its critic does): a stage in which only the branch learns to
+    # hold what a walker hands it, the walk at every speed kept as it is
     stand_gamma: float = 0.0  # > 0, with stand_branch: the discount of the rows the branch acts
     # on (the walker's stay gamma): a stander that sees a slow drift's fall seconds ahead
     stand_gamma_rows: str = "branch"  # where stand_gamma holds: "branch" (command 0 in model
@@ -212,6 +215,11 @@ class PPOConfig:
             raise ValueError("--stand-branch-from goes with --stand-branch and --init-from")
         if self.stand_branch_frozen and not self.stand_branch:
             raise ValueError("--stand-branch-frozen goes with --stand-branch")
+        if self.walker_frozen and not self.stand_branch:
+            raise ValueError("--walker-frozen goes with --stand-branch")
+        if self.walker_frozen and self.stand_branch_frozen:
+            raise ValueError("--walker-frozen and --stand-branch-frozen together leave no actor "
+                             "to learn")  # fmt: skip
         if self.stand_gamma > 0 and not self.stand_branch:
             raise ValueError("--stand-gamma goes with --stand-branch")
         if self.stand_gamma_rows != "branch" and self.stand_gamma <= 0:

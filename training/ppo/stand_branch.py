@@ -85,9 +85,19 @@ def actor_parameters(policy) -> list:
     return [q for name, q in policy.named_parameters() if name.startswith(BRANCH_ACTOR)]
 
 
-def freeze_actor(policy) -> None:
-    """Keep the branch's actor as it is: no gradient reaches it, so Adam never moves it."""
-    for q in actor_parameters(policy):
+def walker_parameters(policy) -> list:
+    """The walker's actor parameters of ``policy``: its MLP, action head and learned log-std."""
+    return [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters(),
+            policy.log_std]  # fmt: skip
+
+
+def freeze_actor(policy, which: str = "branch") -> None:
+    """Keep an actor as it is: no gradient reaches it, so Adam never moves it.
+
+    ``which``: "branch" (:func:`actor_parameters`) or "walker" (:func:`walker_parameters`).
+    """
+    params = {"branch": actor_parameters, "walker": walker_parameters}[which](policy)
+    for q in params:
         q.requires_grad_(False)
 
 

@@ -417,10 +417,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         model = _start_from(cfg, run, vecnorm, fs)
     else:
         model = make_model(cfg, vecnorm, fs)
-    if cfg.stand_branch_frozen:  # new or resumed: its actor never learns
+    if cfg.stand_branch_frozen or cfg.walker_frozen:  # new or resumed: never learns
         from training.ppo.stand_branch import freeze_actor
 
-        freeze_actor(model.policy)
+        freeze_actor(model.policy, "walker" if cfg.walker_frozen else "branch")
     if model.num_timesteps == 0:
         try:
             initial_actions(model, cfg)
