@@ -155,6 +155,8 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"stand_branch": True, "stand_branch_from": "x", **COMMAND}, "--init-from"),
         ({"stand_branch_frozen": True, **COMMAND}, "goes with --stand-branch"),
         ({"walker_frozen": True, **COMMAND}, "--walker-frozen goes with --stand-branch"),
+        ({"learn_rows": "zero_command", **COMMAND}, "--learn-rows goes with --stand-branch"),
+        ({"stand_branch": True, "learn_rows": "stops", **COMMAND}, "learn.rows"),
         ({"stand_branch": True, "walker_frozen": True, "stand_branch_frozen": True, **COMMAND},
          "no actor"),
         ({"stand_gamma": 0.99, **COMMAND}, "--stand-gamma goes with --stand-branch"),
@@ -360,6 +362,23 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
             assert same, name
         elif name in ("value_net.weight", "branch_value.weight", "branch_action.weight"):
             assert not same, name  # the test could fail: the rest learned
+    # learning from the stops alone: with no zero command in training no actor moves at all;
+    # with every command zero, the walker (its braking rows) learns
+    for zero, name in ((0.0, "n"), (1.0, "z")):
+        rc = train_ppo.main([*flags, "--learning-rate", "1e-2", "--out-dir", str(tmp_path / name),
+                             "--init-from", str(run), "--stand-branch", "--learn-rows",
+                             "zero_command", "--train-env",
+                             f"command={{range = [0, 2], zero_fraction = {zero}}}"])  # fmt: skip
+        assert rc == 0
+        (out,) = (tmp_path / name / "train_ppo").iterdir()
+        after, _, cfg, _ = load_policy(out, "final")
+        assert cfg.learn_rows == "zero_command"
+        before = policy.state_dict()
+        moved = {k for k, v in after.state_dict().items() if not torch.equal(v, before[k])}
+        assert "value_net.weight" in moved  # the critic learns from every row
+        actor = {k for k in moved if k.startswith((*walker_names, "branch_net.", "branch_action."))}
+        assert (not actor) if zero == 0.0 else ("action_net.weight" in actor), (zero, actor)
+    # a later stage from it keeps its branch and needs the option
     rc = train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(run),
                          "--stand-branch"])  # fmt: skip
     assert rc == 0

@@ -35,7 +35,8 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         from training.ppo.stand_branch import StandBranchPolicy
 
         policy = StandBranchPolicy
-    extra = {"normalize_advantage": False} if cfg.stand_balance else {}  # the callback does it
+    # the callback (stand_balance, learn_rows) normalises the advantages, once per rollout
+    extra = {"normalize_advantage": False} if cfg.stand_balance or cfg.learn_rows != "all" else {}
     if cfg.stand_gamma > 0:
         from training.ppo.stand_branch import BranchDiscountBuffer
 

@@ -128,6 +128,10 @@ class PPOConfig:
     # observation statistics then stay the start's (the returns' still move)
     stand_branch_frozen: bool = False  # with stand_branch: the branch's actor does not learn
     # (its critic does): a stage in which only the walker learns to hand over to it
+    learn_rows: str = "all"  # the rows whose advantages train the actor: "all", or
+    # "zero_command" (with stand_branch: only the rows commanded to stop, the walker's braking
+    # steps and the branch's; the other rows' advantages are 0, so the walk at a speed changes
+    # only as the shared weights carry the braking's updates) (training.ppo.stand_branch)
     walker_frozen: bool = False  # with stand_branch: the walker's actor (its MLP, head and
     # learned std) does not learn (its critic does): a stage in which only the branch learns to
     # hold what a walker hands it, the walk at every speed kept as it is
@@ -215,6 +219,10 @@ class PPOConfig:
             raise ValueError("--stand-branch-from goes with --stand-branch and --init-from")
         if self.stand_branch_frozen and not self.stand_branch:
             raise ValueError("--stand-branch-frozen goes with --stand-branch")
+        if self.learn_rows != "all" and not self.stand_branch:
+            raise ValueError("--learn-rows goes with --stand-branch")
+        if self.learn_rows != "all" and self.stand_balance:
+            raise ValueError("--learn-rows and --stand-balance both set the advantages: give one")
         if self.walker_frozen and not self.stand_branch:
             raise ValueError("--walker-frozen goes with --stand-branch")
         if self.walker_frozen and self.stand_branch_frozen:
@@ -461,6 +469,7 @@ def _choices() -> dict[str, tuple]:
         "select_by": ("mean", "min", "return"),
         "init_normalizer": ("snapshot", "fresh"),
         "stand_gamma_rows": ("branch", "zero_command"),
+        "learn_rows": ("all", "zero_command"),
         "activation": ACTIVATIONS,
     }
 

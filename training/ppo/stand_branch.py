@@ -298,6 +298,41 @@ class BranchDiscountBuffer(RolloutBuffer):
         self.returns = self.advantages + self.values
 
 
+def learn_rows_callback(rows: str = "zero_command"):
+    """A callback: after each rollout, only the rows commanded to stop keep their advantages.
+
+    ``PPOConfig.learn_rows`` "zero_command": the rollout's advantages (after GAE) are normalised
+    over the rows whose command is 0 (:func:`zero_command`: the walker's braking steps and the
+    branch's rows), and every other row's is set to 0, so that its clipped PPO term, and with no
+    entropy bonus its whole policy loss, is 0: the actor learns from the stops alone (the
+    critics from every row). SB3 must not normalise each minibatch again
+    (:func:`training.ppo.build.make_model` turns ``normalize_advantage`` off).
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    if rows != "zero_command":
+        raise ValueError(f"rows must be 'zero_command', got {rows!r}")
+
+    class LearnRows(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            buf = self.model.rollout_buffer
+            if getattr(self.model, "normalize_advantage", False):
+                raise RuntimeError("learn_rows: SB3 would normalise each minibatch again")
+            obs = torch.as_tensor(buf.observations.reshape(-1, buf.observations.shape[-1]))
+            keep = zero_command(obs).numpy().reshape(buf.advantages.shape)
+            adv = buf.advantages
+            if keep.any():
+                kept = adv[keep]
+                adv[keep] = (kept - kept.mean()) / (kept.std() + 1e-8)
+            adv[~keep] = 0.0
+            self.logger.record("train/learn_rows_fraction", float(keep.mean()))
+
+    return LearnRows()
+
+
 def truncation_discount(stand_gamma: float, rows: str = "branch"):
     """A callback: an episode cut by its time limit on a ``rows`` row bootstraps at ``stand_gamma``.
 

@@ -464,6 +464,10 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         from training.ppo.exploration import stand_balance_callback
 
         balance = stand_balance_callback()
+    if cfg.learn_rows != "all":
+        from training.ppo.stand_branch import learn_rows_callback
+
+        balance = learn_rows_callback(cfg.learn_rows)
     branch_discount = None
     if cfg.stand_gamma > 0:
         from training.ppo.stand_branch import truncation_discount
