@@ -156,6 +156,7 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"stand_branch_frozen": True, **COMMAND}, "goes with --stand-branch"),
         ({"walker_frozen": True, **COMMAND}, "--walker-frozen goes with --stand-branch"),
         ({"learn_rows": "zero_command", **COMMAND}, "--learn-rows goes with --stand-branch"),
+        ({"brake_branch": True, **COMMAND}, "--brake-branch goes with --stand-branch"),
         ({"stand_branch": True, "learn_rows": "stops", **COMMAND}, "learn.rows"),
         ({"stand_branch": True, "walker_frozen": True, "stand_branch_frozen": True, **COMMAND},
          "no actor"),
@@ -378,6 +379,59 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
         assert "value_net.weight" in moved  # the critic learns from every row
         actor = {k for k in moved if k.startswith((*walker_names, "branch_net.", "branch_action."))}
         assert (not actor) if zero == 0.0 else ("action_net.weight" in actor), (zero, actor)
+    # a braking actor: starts as the walker's copy (the network acts as its start on every
+    # row), acts on the rows commanded to stop outside model 4, learns there with the walker
+    # frozen (every command zero, starts mid-stride: braking rows)
+    rc = train_ppo.main([*flags, "--learning-rate", "1e-2", "--out-dir", str(tmp_path / "k"),
+                         "--init-from", str(run), "--stand-branch", "--brake-branch",
+                         "--walker-frozen", "--train-env", "start={stride = 1.0}", "--train-env",
+                         "command={range = [0, 2], zero_fraction = 1.0}"])  # fmt: skip
+    assert rc == 0
+    (braked,) = (tmp_path / "k" / "train_ppo").iterdir()
+    after, _, cfg, _ = load_policy(braked, "final")
+    assert cfg.brake_branch and after.brake_branch
+    before = policy.state_dict()
+    start_of = {
+        "brake_net.": "mlp_extractor.policy_net.",
+        "brake_action.": "action_net.",
+        "brake_log_std": "log_std",
+    }  # the braking actor started as the walker's copy
+
+    def start_value(k):
+        for mine, walker in start_of.items():
+            if k.startswith(mine):
+                return before[walker + k[len(mine) :]]
+        return before[k]
+
+    moved = {k for k, v in after.state_dict().items() if not torch.equal(v, start_value(k))}
+    assert not {k for k in moved if k.startswith(walker_names)}
+    assert {"brake_action.weight", "brake_net.0.weight"} <= moved  # the test could fail
+    obs = torch.as_tensor(np.random.default_rng(0).normal(size=(400, policy.features_dim)),
+                          dtype=torch.float32)  # fmt: skip
+    obs[::2, -1] = 0.0  # half commanded to stop
+    brake = StandBranchPolicy.brake_gate(obs)
+    assert brake.any() and not (brake & StandBranchPolicy.gate(obs)).any()
+    assert torch.equal(brake, (obs[:, -1] == 0) & ~StandBranchPolicy.gate(obs))
+    with torch.no_grad():
+        mine, theirs = (p.get_distribution(obs).distribution.mean for p in (after, policy))
+        walk = obs[:, -1] != 0
+        assert torch.equal(mine[walk], theirs[walk])  # the walk at every command as it was
+        assert not torch.allclose(mine[brake], theirs[brake])  # the braking rows learned
+    # its start acted as the start's network on every row (a copy, before any update)
+    rc = train_ppo.main([*flags, *tiny, "--out-dir", str(tmp_path / "k0"), "--init-from",
+                         str(run), "--stand-branch", "--brake-branch"])  # fmt: skip
+    assert rc == 0
+    (copied,) = (tmp_path / "k0" / "train_ppo").iterdir()
+    start, _, _, _ = load_policy(copied, "best" if (copied / "best").exists() else "final")
+    sd = start.state_dict()
+    for mine, walker in start_of.items():
+        for k in (k for k in sd if k.startswith(mine)):
+            np.testing.assert_allclose(
+                sd[k].numpy(), sd[walker + k[len(mine) :]].numpy(), atol=1e-6
+            )
+    with pytest.raises(SystemExit, match="give --brake-branch"):
+        train_ppo.main([*flags, "--out-dir", str(tmp_path / "k1"), "--init-from", str(braked),
+                        "--stand-branch"])  # fmt: skip
     # a later stage from it keeps its branch and needs the option
     rc = train_ppo.main([*flags, "--out-dir", str(tmp_path / "c"), "--init-from", str(run),
                          "--stand-branch"])  # fmt: skip

@@ -44,7 +44,7 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from training.ppo.stand_branch import actor_parameters, walker_parameters
+    from training.ppo.stand_branch import actor_parameters, brake_parameters, walker_parameters
 
     class CriticWarmup(BaseCallback):
         def __init__(self):
@@ -68,7 +68,7 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
             frozen = self.rollouts <= cfg.critic_warmup
             branch = [] if cfg.stand_branch_frozen else actor_parameters(p)  # frozen: stays so
             walker = [] if cfg.walker_frozen else walker_parameters(p)
-            for param in [*walker, *branch]:
+            for param in [*walker, *branch, *brake_parameters(p)]:
                 param.requires_grad_(not frozen)
 
     return CriticWarmup()

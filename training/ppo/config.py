@@ -128,6 +128,9 @@ class PPOConfig:
     # observation statistics then stay the start's (the returns' still move)
     stand_branch_frozen: bool = False  # with stand_branch: the branch's actor does not learn
     # (its critic does): a stage in which only the walker learns to hand over to it
+    brake_branch: bool = False  # with stand_branch: a third actor (the walker's shape) acts on
+    # the rows commanded to stop outside model 4 (the braking steps, else the walker's), started
+    # as a copy of the walker's actor where the start has none (training.ppo.stand_branch)
     learn_rows: str = "all"  # the rows whose advantages train the actor: "all", or
     # "zero_command" (with stand_branch: only the rows commanded to stop, the walker's braking
     # steps and the branch's; the other rows' advantages are 0, so the walk at a speed changes
@@ -219,6 +222,8 @@ class PPOConfig:
             raise ValueError("--stand-branch-from goes with --stand-branch and --init-from")
         if self.stand_branch_frozen and not self.stand_branch:
             raise ValueError("--stand-branch-frozen goes with --stand-branch")
+        if self.brake_branch and not self.stand_branch:
+            raise ValueError("--brake-branch goes with --stand-branch")
         if self.learn_rows != "all" and not self.stand_branch:
             raise ValueError("--learn-rows goes with --stand-branch")
         if self.learn_rows != "all" and self.stand_balance:
@@ -419,6 +424,8 @@ class PPOConfig:
             "log_std_init": self.log_std_init,
             "activation_fn": activation_fn(self.activation),
         }
+        if self.brake_branch:  # refused without stand_branch (StandBranchPolicy's option)
+            kw["brake_branch"] = True
         if self.teacher:
             from training.ppo.imitation import FixedNormalizer
 

@@ -34,6 +34,14 @@ longer-horizon value, so the walker's returns near a stop change too). With
 to stop, in any contact state: the walker's braking steps before both feet are down then see
 the stop's fall seconds ahead too, while the walk at any other command keeps its short
 horizon. A run started from another (``init_from``) does not inherit the option: give it again.
+
+A third actor may take the braking (``PPOConfig.brake_branch``): the rows commanded to stop
+outside model 4 (a walk's last steps before both feet are down), which are otherwise the
+walker's. It reads the walker's normalised input (no map), has the walker's shape and starts as
+a copy of the walker's actor, so the network at its start acts exactly as before; from there the
+braking learns in its own weights, and the walk at every commanded speed, whose rows it never
+acts on, does not move with it (with one actor the braking's updates carry into the walk at slow
+commands: ``results/command_stage18``). Its rows' values stay the walker's critic's.
 """
 
 from __future__ import annotations
@@ -85,6 +93,23 @@ def actor_parameters(policy) -> list:
     return [q for name, q in policy.named_parameters() if name.startswith(BRANCH_ACTOR)]
 
 
+BRAKE_ACTOR = ("brake_net.", "brake_action.", "brake_log_std")
+"""Name prefixes of the braking actor's parameters (``brake_branch``)."""
+
+
+def brake_parameters(policy) -> list:
+    """The braking actor's parameters of ``policy`` (:data:`BRAKE_ACTOR`; none without one)."""
+    return [q for name, q in policy.named_parameters() if name.startswith(BRAKE_ACTOR)]
+
+
+def copy_walker_to_brake(policy) -> None:
+    """Set the braking actor to the walker's actor (MLP, head, learned log-std), in place."""
+    with torch.no_grad():
+        policy.brake_net.load_state_dict(policy.mlp_extractor.policy_net.state_dict())
+        policy.brake_action.load_state_dict(policy.action_net.state_dict())
+        policy.brake_log_std.copy_(policy.log_std)
+
+
 def walker_parameters(policy) -> list:
     """The walker's actor parameters of ``policy``: its MLP, action head and learned log-std."""
     return [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters(),
@@ -117,8 +142,10 @@ class StandBranchPolicy(RowPolicy):
     observation, so PPO's ratio stays exact.
     """
 
-    def __init__(self, *args, branch_log_std_init: float = -3.0, **kwargs):
+    def __init__(self, *args, branch_log_std_init: float = -3.0, brake_branch: bool = False,
+                 **kwargs):  # fmt: skip
         self._branch_log_std_init = float(branch_log_std_init)
+        self.brake_branch = bool(brake_branch)
         super().__init__(*args, **kwargs)
         if self.use_sde:
             raise ValueError("stand_branch does not combine with use_sde")
@@ -141,7 +168,13 @@ class StandBranchPolicy(RowPolicy):
         self.branch_value_net = nn.Sequential(*[m.__class__(*_shape(m)) for m in layers])
         self.branch_value = nn.Linear(n_in, 1)
         self.register_buffer("branch_value_scale", torch.tensor(1.0))
+        if self.brake_branch:  # the walker's shape; set from the walker's weights after the build
+            self.brake_net = nn.Sequential(*[m.__class__(*_shape(m)) for m in layers])
+            self.brake_action = nn.Linear(n_in, n_act)
+            self.brake_log_std = nn.Parameter(torch.zeros(n_act))
         super()._build(lr_schedule)
+        if self.brake_branch:
+            copy_walker_to_brake(self)
         if self.ortho_init:  # as SB3 initialises the walker's actor and critic
             gains = ((self.branch_net, np.sqrt(2)), (self.branch_action, 0.01),
                      (self.branch_value_net, np.sqrt(2)), (self.branch_value, 1.0))  # fmt: skip
@@ -158,11 +191,17 @@ class StandBranchPolicy(RowPolicy):
         """
         return zero_command(obs) & (obs.float()[..., MODE_ENTRY] > 0)
 
+    @staticmethod
+    def brake_gate(obs: torch.Tensor) -> torch.Tensor:
+        """The braking actor's rows: command exactly 0, outside model 4 (read as :meth:`gate`)."""
+        return zero_command(obs) & ~(obs.float()[..., MODE_ENTRY] > 0)
+
     def _see(self, obs) -> None:
         if obs is None:
-            self._gate = self._obs = None
+            self._gate = self._brake = self._obs = None
         else:
             self._gate, self._obs = self.gate(obs), self.extract_features(obs).float()
+            self._brake = self.brake_gate(obs) if self.brake_branch else None
 
     def forward(self, obs, deterministic: bool = False):
         """SB3's rollout pass; the gated rows' values the branch's critic's."""
@@ -195,8 +234,14 @@ class StandBranchPolicy(RowPolicy):
         if self._gate is None:  # every public route sets the rows first
             raise RuntimeError("StandBranchPolicy: the distribution needs the observation")
         gate = self._gate[:, None]
-        mean = torch.where(gate, self.branch_mean(self._obs), self.action_net(latent_pi))
-        log_std = torch.where(gate, self.branch_log_std, self.log_std)
+        mean, log_std = self.action_net(latent_pi), self.log_std
+        if self.brake_branch:
+            brake = self._brake[:, None]
+            brake_mean = self.brake_action(self.brake_net(self._obs))
+            mean = torch.where(brake, brake_mean, mean)
+            log_std = torch.where(brake, self.brake_log_std, log_std)
+        mean = torch.where(gate, self.branch_mean(self._obs), mean)
+        log_std = torch.where(gate, self.branch_log_std, log_std)
         return self.action_dist.proba_distribution(mean, log_std)
 
 

@@ -290,17 +290,37 @@ def _load_start(cfg: PPOConfig, start, snap, policy) -> None:
 
     ``start``: the start's config (None: it has none). A ``stand_branch`` run from a start
     without one takes the start's walker (every weight an ``MlpPolicy`` has) and keeps its
-    branch as built (random, or then from ``stand_branch_from``).
+    branch as built (random, or then from ``stand_branch_from``). A ``brake_branch`` run from a
+    start without a braking actor starts it as a copy of the start's walker.
     """
+    has_brake = start is not None and start.brake_branch
+    if cfg.brake_branch and not has_brake and start is not None and start.stand_branch:
+        from dataclasses import replace
+
+        from training.ppo.stand_branch import copy_walker_to_brake
+
+        plain = build_policy(replace(cfg, brake_branch=False))
+        load_weights(plain, snap)
+        missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
+        assert not unexpected and all(k.startswith("brake_") for k in missing), missing
+        copy_walker_to_brake(policy)  # the start's walker, braking as it did
+        return
+    if has_brake and not cfg.brake_branch:
+        raise Refusal("train_ppo: error: --init-from: the start's network has a braking "
+                      "actor; give --brake-branch to this run too")  # fmt: skip
     if not cfg.stand_branch or (start is not None and start.stand_branch):
         load_weights(policy, snap)
         return
     from dataclasses import replace
 
-    plain = build_policy(replace(cfg, stand_branch=False, stand_branch_from=""))
+    plain = build_policy(replace(cfg, stand_branch=False, stand_branch_from="", brake_branch=False))
     load_weights(plain, snap)
     missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
-    assert not unexpected and all(k.startswith("branch_") for k in missing), (missing, unexpected)
+    assert not unexpected and all(k.startswith(("branch_", "brake_")) for k in missing), missing
+    if cfg.brake_branch:
+        from training.ppo.stand_branch import copy_walker_to_brake
+
+        copy_walker_to_brake(policy)  # the start's walker, braking as it did
 
 
 def _branch_source(path: Path):
