@@ -157,6 +157,8 @@ def test_a_branch_from_another_actor_computes_that_actors_action_on_its_own_inpu
         ({"walker_frozen": True, **COMMAND}, "--walker-frozen goes with --stand-branch"),
         ({"learn_rows": "zero_command", **COMMAND}, "--learn-rows goes with --stand-branch"),
         ({"brake_branch": True, **COMMAND}, "--brake-branch goes with --stand-branch"),
+        ({"stand_branch": True, "learn_rows": "zero_command", "ent_coef": 0.01, **COMMAND},
+         "--ent-coef 0"),
         ({"stand_branch": True, "learn_rows": "stops", **COMMAND}, "learn.rows"),
         ({"stand_branch": True, "walker_frozen": True, "stand_branch_frozen": True, **COMMAND},
          "no actor"),
@@ -398,9 +400,9 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     }  # the braking actor started as the walker's copy
 
     def start_value(k):
-        for mine, walker in start_of.items():
+        for mine, src in start_of.items():
             if k.startswith(mine):
-                return before[walker + k[len(mine) :]]
+                return before[src + k[len(mine) :]]
         return before[k]
 
     moved = {k for k, v in after.state_dict().items() if not torch.equal(v, start_value(k))}
@@ -411,7 +413,12 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     obs[::2, -1] = 0.0  # half commanded to stop
     brake = StandBranchPolicy.brake_gate(obs)
     assert brake.any() and not (brake & StandBranchPolicy.gate(obs)).any()
-    assert torch.equal(brake, (obs[:, -1] == 0) & ~StandBranchPolicy.gate(obs))
+    # the gates by their definition: a zero command in model 4 stands, elsewhere brakes
+    rows = torch.zeros(4, policy.features_dim)
+    rows[:, -1] = torch.tensor([0.0, 0.0, 0.5, 0.5])  # the command [m/s]
+    rows[:, MODE_ENTRY] = torch.tensor([3.0, -0.2, 3.0, -0.2])  # model 4 or not (normalised)
+    assert StandBranchPolicy.gate(rows).tolist() == [True, False, False, False]
+    assert StandBranchPolicy.brake_gate(rows).tolist() == [False, True, False, False]
     with torch.no_grad():
         mine, theirs = (p.get_distribution(obs).distribution.mean for p in (after, policy))
         walk = obs[:, -1] != 0
@@ -424,11 +431,24 @@ def test_a_run_with_a_branch_from_a_walker_and_a_stander_saves_and_loads_it(tmp_
     (copied,) = (tmp_path / "k0" / "train_ppo").iterdir()
     start, _, _, _ = load_policy(copied, "best" if (copied / "best").exists() else "final")
     sd = start.state_dict()
-    for mine, walker in start_of.items():
+    for mine, src in start_of.items():
         for k in (k for k in sd if k.startswith(mine)):
-            np.testing.assert_allclose(
-                sd[k].numpy(), sd[walker + k[len(mine) :]].numpy(), atol=1e-6
-            )
+            np.testing.assert_allclose(sd[k].numpy(), sd[src + k[len(mine) :]].numpy(), atol=1e-6)
+    # from a plain walker (no branch) with the config's own initial noise: the copy is made
+    # once the walker is as the run starts it, so it acts as the walker, noise included
+    rc = train_ppo.main([*flags, *tiny, "--out-dir", str(tmp_path / "k2"), "--init-from",
+                         str(walker), "--stand-branch", "--brake-branch", "--action-std-nm",
+                         "0.3"])  # fmt: skip
+    assert rc == 0
+    (k2,) = (tmp_path / "k2" / "train_ppo").iterdir()
+    start, _, cfg2, _ = load_policy(k2, "final")
+    sd = start.state_dict()
+    gear = torch.as_tensor(cfg2.action_map().gear, dtype=torch.float32)
+    np.testing.assert_allclose(sd["brake_log_std"].numpy(), torch.log(0.3 / gear).numpy(),
+                               rtol=1e-5)  # fmt: skip
+    for mine, src in start_of.items():
+        for k in (k for k in sd if k.startswith(mine)):
+            np.testing.assert_allclose(sd[k].numpy(), sd[src + k[len(mine) :]].numpy(), atol=1e-6)
     with pytest.raises(SystemExit, match="give --brake-branch"):
         train_ppo.main([*flags, "--out-dir", str(tmp_path / "k1"), "--init-from", str(braked),
                         "--stand-branch"])  # fmt: skip

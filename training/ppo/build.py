@@ -107,6 +107,10 @@ def redraw_network(model, cfg: PPOConfig, seed: int) -> None:
                                use_sde=model.use_sde, **model.policy_kwargs)  # fmt: skip
     p.load_state_dict(fresh.state_dict())
     initial_actions(model, cfg)
+    if getattr(p, "brake_branch", False):  # a new network's braking actor: its walker's copy
+        from training.ppo.stand_branch import copy_walker_to_brake
+
+        copy_walker_to_brake(p)
     p.optimizer = p.optimizer_class(p.parameters(), lr=model.lr_schedule(1.0),
                                     **p.optimizer_kwargs)  # fmt: skip
 

@@ -137,7 +137,8 @@ class PPOConfig:
     # only as the shared weights carry the braking's updates) (training.ppo.stand_branch)
     walker_frozen: bool = False  # with stand_branch: the walker's actor (its MLP, head and
     # learned std) does not learn (its critic does): a stage in which only the branch learns to
-    # hold what a walker hands it, the walk at every speed kept as it is
+    # hold what a walker hands it, the walk at every speed kept as it is (its std, as in any
+    # stage, the config's initial one where it sets one; its input's statistics still move)
     stand_gamma: float = 0.0  # > 0, with stand_branch: the discount of the rows the branch acts
     # on (the walker's stay gamma): a stander that sees a slow drift's fall seconds ahead
     stand_gamma_rows: str = "branch"  # where stand_gamma holds: "branch" (command 0 in model
@@ -230,9 +231,12 @@ class PPOConfig:
             raise ValueError("--learn-rows and --stand-balance both set the advantages: give one")
         if self.walker_frozen and not self.stand_branch:
             raise ValueError("--walker-frozen goes with --stand-branch")
-        if self.walker_frozen and self.stand_branch_frozen:
+        if self.walker_frozen and self.stand_branch_frozen and not self.brake_branch:
             raise ValueError("--walker-frozen and --stand-branch-frozen together leave no actor "
                              "to learn")  # fmt: skip
+        if self.learn_rows != "all" and self.ent_coef != 0:
+            raise ValueError("--learn-rows needs --ent-coef 0 (an entropy bonus moves every "
+                             "actor's noise on every row)")  # fmt: skip
         if self.stand_gamma > 0 and not self.stand_branch:
             raise ValueError("--stand-gamma goes with --stand-branch")
         if self.stand_gamma_rows != "branch" and self.stand_gamma <= 0:

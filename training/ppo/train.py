@@ -291,20 +291,17 @@ def _load_start(cfg: PPOConfig, start, snap, policy) -> None:
     ``start``: the start's config (None: it has none). A ``stand_branch`` run from a start
     without one takes the start's walker (every weight an ``MlpPolicy`` has) and keeps its
     branch as built (random, or then from ``stand_branch_from``). A ``brake_branch`` run from a
-    start without a braking actor starts it as a copy of the start's walker.
+    start without a braking actor gets its copy of the walker later (:func:`_start_brake`).
     """
     has_brake = start is not None and start.brake_branch
     if cfg.brake_branch and not has_brake and start is not None and start.stand_branch:
         from dataclasses import replace
 
-        from training.ppo.stand_branch import copy_walker_to_brake
-
         plain = build_policy(replace(cfg, brake_branch=False))
         load_weights(plain, snap)
         missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
         assert not unexpected and all(k.startswith("brake_") for k in missing), missing
-        copy_walker_to_brake(policy)  # the start's walker, braking as it did
-        return
+        return  # the braking actor: the walker's copy once the start is set (_start_brake)
     if has_brake and not cfg.brake_branch:
         raise Refusal("train_ppo: error: --init-from: the start's network has a braking "
                       "actor; give --brake-branch to this run too")  # fmt: skip
@@ -317,10 +314,21 @@ def _load_start(cfg: PPOConfig, start, snap, policy) -> None:
     load_weights(plain, snap)
     missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
     assert not unexpected and all(k.startswith(("branch_", "brake_")) for k in missing), missing
-    if cfg.brake_branch:
+
+
+def _start_brake(cfg: PPOConfig, policy) -> None:
+    """A new ``brake_branch`` run's braking actor: the walker's copy, unless its start had one.
+
+    Called once the walker is as the run starts it (loaded, its pinned inputs folded into the
+    first layer, the config's initial noise and bias set), so the copy acts as the walker does.
+    """
+    if not cfg.brake_branch:
+        return
+    start = _start_config(Path(cfg.init_from)) if cfg.init_from else None
+    if start is None or not start.brake_branch:
         from training.ppo.stand_branch import copy_walker_to_brake
 
-        copy_walker_to_brake(policy)  # the start's walker, braking as it did
+        copy_walker_to_brake(policy)
 
 
 def _branch_source(path: Path):
@@ -440,12 +448,15 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     if cfg.stand_branch_frozen or cfg.walker_frozen:  # new or resumed: never learns
         from training.ppo.stand_branch import freeze_actor
 
-        freeze_actor(model.policy, "walker" if cfg.walker_frozen else "branch")
+        for which, frozen in (("walker", cfg.walker_frozen), ("branch", cfg.stand_branch_frozen)):
+            if frozen:
+                freeze_actor(model.policy, which)
     if model.num_timesteps == 0:
         try:
             initial_actions(model, cfg)
         except ValueError as e:
             raise Refusal(f"train_ppo: error: {e}") from None
+        _start_brake(cfg, model.policy)
         if cfg.teacher and not available(run.path, "imitation"):  # the imitation result alone
             arrays = {"demos.npz": {"obs": demos.obs, "act": demos.act}}
             save_snapshot(fs / "imitation", model.policy, {"num_timesteps": 0}, vecnorm,
