@@ -294,26 +294,23 @@ def _load_start(cfg: PPOConfig, start, snap, policy) -> None:
     start without a braking actor gets its copy of the walker later (:func:`_start_brake`).
     """
     has_brake = start is not None and start.brake_branch
-    if cfg.brake_branch and not has_brake and start is not None and start.stand_branch:
-        from dataclasses import replace
-
-        plain = build_policy(replace(cfg, brake_branch=False))
-        load_weights(plain, snap)
-        missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
-        assert not unexpected and all(k.startswith("brake_") for k in missing), missing
-        return  # the braking actor: the walker's copy once the start is set (_start_brake)
     if has_brake and not cfg.brake_branch:
         raise Refusal("train_ppo: error: --init-from: the start's network has a braking "
                       "actor; give --brake-branch to this run too")  # fmt: skip
-    if not cfg.stand_branch or (start is not None and start.stand_branch):
+    has_branch = start is not None and start.stand_branch
+    added = (() if has_branch or not cfg.stand_branch else ("branch_",)) + (
+        () if has_brake or not cfg.brake_branch else ("brake_",))  # fmt: skip
+    if not added:
         load_weights(policy, snap)
         return
     from dataclasses import replace
 
-    plain = build_policy(replace(cfg, stand_branch=False, stand_branch_from="", brake_branch=False))
-    load_weights(plain, snap)
-    missing, unexpected = policy.load_state_dict(plain.state_dict(), strict=False)
-    assert not unexpected and all(k.startswith(("branch_", "brake_")) for k in missing), missing
+    # the start's own network (its parts only), loaded, then into this run's
+    shape = build_policy(replace(cfg, stand_branch=has_branch, stand_branch_from="",
+                                 brake_branch=False))  # fmt: skip
+    load_weights(shape, snap)
+    missing, unexpected = policy.load_state_dict(shape.state_dict(), strict=False)
+    assert not unexpected and all(k.startswith(added) for k in missing), missing
 
 
 def _start_brake(cfg: PPOConfig, policy) -> None:
