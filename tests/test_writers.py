@@ -403,6 +403,42 @@ def test_an_interrupted_command_leaves_no_partial_file(tmp_path):
     assert (out / "result.json").read_text() == "old"
 
 
+DROPPED_CTRL_C = """
+import gc, os, signal, sys
+sys.orig_argv = [sys.executable, "-m", "training.evaluation.evaluate"]
+import training
+from training.plumbing.outputs import command_output
+
+
+class Finaliser:
+    def __del__(self):  # Ctrl-C arrives while Python runs a finaliser: it drops the exception
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(1000):
+            pass
+
+
+with command_output(sys.argv[1], "evaluate") as co:
+    co.dir().write("evaluation.json", "new")
+    Finaliser()
+    gc.collect()
+    print("the work went on", flush=True)
+"""
+
+
+def test_a_ctrl_c_that_python_drops_still_writes_nothing(tmp_path):
+    """Ctrl-C raised inside a finaliser is dropped by Python ("Exception ignored"); the command
+    records it, and its output is not moved in as if the work had finished."""
+    out = tmp_path / "out"
+    with command_output(out, "evaluate") as co:
+        co.dir().write("evaluation.json", "old")
+    p = subprocess.run([sys.executable, "-c", DROPPED_CTRL_C, str(out)], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=120, env=ENV)  # fmt: skip
+    assert "the work went on" in p.stdout and "Exception ignored" in p.stderr, p.stderr
+    assert p.returncode != 0
+    assert (out / "evaluation.json").read_text() == "old"
+    assert sorted(q.name for q in out.iterdir()) == [MARKER, "evaluation.json"]
+
+
 @pytest.mark.parametrize("module", ["benchmarks.failure_modes", "benchmarks.accuracy"])
 def test_benchmarks_refuse_a_foreign_or_linked_out(tmp_path, victim, module):
     link = tmp_path / "link"

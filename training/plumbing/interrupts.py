@@ -5,12 +5,17 @@ but its module's imports (torch, numba's cache) run before ``main``: a Ctrl-C th
 a traceback. The ``training`` and ``benchmarks`` packages import this module first, so it runs
 before any command module's own imports. When the program is one of the packages' commands
 (``python -m training.ppo.train``: ``sys.orig_argv`` names the module), an uncaught
-KeyboardInterrupt is shown as one line naming the command. Imported as a library, nothing
-changes. Imports nothing but the standard library.
+KeyboardInterrupt is shown as one line naming the command, and Ctrl-C is recorded
+(:func:`received`) before it is raised: Python drops a KeyboardInterrupt raised inside a
+finaliser or a callback it runs on its own ("Exception ignored in ..."), and a command's
+output must not be written as if nothing had happened (``command_output`` checks it before it
+moves anything in). Imported as a library, nothing changes. Imports nothing but the standard
+library.
 """
 
 from __future__ import annotations
 
+import signal
 import sys
 
 PACKAGES = ("training", "benchmarks")
@@ -46,6 +51,22 @@ def _hook(kind, value, tb) -> None:
     sys.__excepthook__(kind, value, tb)
 
 
+_RECEIVED = False
+
+
+def received() -> bool:
+    """Whether Ctrl-C (SIGINT) reached this command, even where Python dropped its exception."""
+    return _RECEIVED
+
+
+def _on_sigint(signum, frame) -> None:
+    global _RECEIVED
+    _RECEIVED = True
+    signal.default_int_handler(signum, frame)  # raises KeyboardInterrupt
+
+
 _NAME = command_name(getattr(sys, "orig_argv", []))
 if _NAME is not None:
     sys.excepthook = _hook
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
+        signal.signal(signal.SIGINT, _on_sigint)

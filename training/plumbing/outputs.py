@@ -37,6 +37,7 @@ import stat
 from collections.abc import Iterator
 from pathlib import Path
 
+from training.plumbing import interrupts
 from training.plumbing.safe_files import MAX_TEXT_BYTES, SHOWN, UntrustedFileError, shown
 
 MARKER = ".written_by.json"
@@ -518,6 +519,8 @@ def command_output(
         co = CommandOutput(out, command, owned)
         try:
             yield co
+            if interrupts.received():  # a Ctrl-C that Python dropped (raised in a finaliser)
+                raise KeyboardInterrupt
             co._commit()
         except KeyboardInterrupt:
             if keep_on_interrupt:
