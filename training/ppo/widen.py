@@ -22,6 +22,8 @@ FIRST_LAYERS = ("mlp_extractor.policy_net.0.weight", "mlp_extractor.value_net.0.
 """The weights that read the observation (after the normaliser): (hidden, observation)."""
 BRANCH_FIRST_LAYERS = ("branch_net.0.weight", "branch_value_net.0.weight")
 """A standing branch's (``training.ppo.stand_branch``) weights that read the observation."""
+BRAKE_FIRST_LAYER = "brake_net.0.weight"
+"""A braking actor's (``brake_branch``) weights that read the observation (as the walker's)."""
 BRANCH_INPUT = ("branch_input.scale", "branch_input.shift")
 """A standing branch's fixed input map ``scale * x + shift`` (one entry per observation entry):
 an added entry gets 1 and 0, read as the run's normaliser gives it, like the walker's."""
@@ -55,10 +57,11 @@ def _insert(a: np.ndarray, added: list[int], values, axis: int) -> np.ndarray:
 def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.ndarray) -> Snapshot:
     """An in-memory copy of ``snap`` whose network and normaliser read the ``added`` entries.
 
-    The policy's first layers gain zero columns at ``added`` (a standing branch's too, its input
-    map 1 and 0 there), the observation statistics ``mean`` and ``var`` there; every other file
-    is the snapshot's own. ValueError where the snapshot's network has no such first layers (an
-    in-network normaliser) or only part of a standing branch.
+    The policy's first layers gain zero columns at ``added`` (a standing branch's and a braking
+    actor's too, the branch's input map 1 and 0 there), the observation statistics ``mean`` and
+    ``var`` there; every other file is the snapshot's own. ValueError where the snapshot's
+    network has no such first layers (an in-network normaliser) or only part of a standing
+    branch.
     """
     import torch
     from safetensors.torch import save
@@ -77,7 +80,8 @@ def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.n
     if branch and len(branch) != len(BRANCH_FIRST_LAYERS) + len(BRANCH_INPUT):
         raise ValueError(f"{snap.path}: a standing branch without all of "
                          f"{BRANCH_FIRST_LAYERS + BRANCH_INPUT} to widen")  # fmt: skip
-    for k in FIRST_LAYERS + (BRANCH_FIRST_LAYERS if branch else ()):
+    brake = (BRAKE_FIRST_LAYER,) if BRAKE_FIRST_LAYER in tensors else ()
+    for k in FIRST_LAYERS + (BRANCH_FIRST_LAYERS if branch else ()) + brake:
         tensors[k] = torch.from_numpy(_insert(tensors[k].numpy(), added, 0.0, axis=1))
     for k, value in zip(BRANCH_INPUT, (1.0, 0.0), strict=True) if branch else ():
         tensors[k] = torch.from_numpy(_insert(tensors[k].numpy(), added, value, axis=0))
