@@ -76,7 +76,7 @@ def test_the_line_runs_by_recorded_hashes_from_random_networks_with_no_teacher()
                 todo.append(NOT_KEPT[sha[:12]])
     assert ends == {WALKER, STANDER} and unkept == set(NOT_KEPT)
     assert read_config(ROOT / STANDER).init_from == ""  # a random network
-    assert len(seen) == 14  # the runs after the walker's three stages, and the two ends
+    assert len(seen) == 19  # the runs after the walker's three stages, and the two ends
 
 
 def _recipe(*flags):
@@ -91,15 +91,17 @@ def _differ(a, b) -> set[str]:
 
 
 def test_the_recipes_last_stage_is_the_committed_config():
-    """``train --config training/configs/ppo_command_stop_50hz.toml --seed 48`` is the run the
+    """``train --config training/configs/ppo_command_stop_50hz.toml --seed 118`` is the run the
     policy is: every setting but the seed (and the progress bar; where a run writes is never
     read back)."""
     b = read_config(POLICY)
-    assert _differ(_recipe("--seed", "48"), b) <= {"progress"}  # the run's: no progress bar
-    assert b.env["command"] == {"deadband": 0.2, "ramp_m_s2": 1.0}  # the joystick options
+    assert _differ(_recipe("--seed", "118"), b) <= {"progress"}  # the run's: no progress bar
+    assert b.env["command"] == {"deadband": 0.2, "ramp_m_s2": 1.5}  # the joystick options
+    assert b.train_env["command"]["ramp_m_s2"] == 1.0  # its training's rate limit
+    assert b.stand_branch and b.brake_branch and b.walker_frozen  # three actors, walker frozen
     # the comparison can fail: another seed, or the env without the joystick options
-    assert _differ(_recipe("--seed", "49"), b) - {"progress"} == {"seed"}
-    assert "env" in _differ(_recipe("--seed", "48", "--env", "command={}"), b)
+    assert _differ(_recipe("--seed", "119"), b) - {"progress"} == {"seed"}
+    assert "env" in _differ(_recipe("--seed", "118", "--env", "command={}"), b)
 
 
 def test_the_network_alone_walks_stops_stands_and_walks_again_from_rest():

@@ -39,12 +39,12 @@ def test_the_committed_policy_follows_the_drive_but_walks_on_at_a_zero_command(c
 
 
 def test_the_committed_policy_that_stops_comes_to_rest_and_walks_again(capsys):
-    """Its own env's joystick options (deadband 0.2 m/s, ramp 1.0 m/s^2), no flag given."""
+    """Its own env's joystick options (deadband 0.2 m/s, ramp 1.5 m/s^2), no flag given."""
     rc = _example().main([str(STOPPER), "--seed", "3"])
     out = capsys.readouterr().out
     rows = _seconds(out)
-    assert "'deadband': 0.2, 'ramp_m_s2': 1.0" in out
-    assert rows[9][0] < 1.5  # the ramp: the held command falls at 1.0 m/s^2 after 8 s
+    assert "'deadband': 0.2, 'ramp_m_s2': 1.5" in out
+    assert rows[8][0] > 1.0 and rows[9][0] == 0.0  # the ramp: 1.5 m/s to 0 in 1 s from 8 s
     assert all(abs(rows[k][1]) < 0.05 for k in range(10, 16)) and "stop: at rest, drift" in out
     assert all(rows[k][1] > 0.9 for k in range(18, 26)) and rc == 0
 

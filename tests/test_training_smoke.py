@@ -275,8 +275,8 @@ def test_a_second_stage_that_observes_more_starts_from_the_same_function(tmp_pat
 
 
 def test_a_network_with_a_standing_branch_widens_to_the_same_function(tmp_path):
-    """The stop policy (a walker and a standing branch) widened for the gravity entries: both
-    heads and both critics compute what the start computed, whatever the slope."""
+    """The stop policy (a walker, a braking actor and a standing branch) widened for the gravity
+    entries: every head and both critics compute what the start computed, whatever the slope."""
     import torch
 
     from training.ppo import train as train_ppo
@@ -296,6 +296,8 @@ def test_a_network_with_a_standing_branch_widens_to_the_same_function(tmp_path):
     obs = rng.normal(0.0, 1.0, (64, 27)) * np.sqrt(old_norm.var) + old_norm.mean
     obs[:32, 17:21] = [0.0, 0.0, 0.0, 1.0]  # model 4 at a zero command: the branch's rows
     obs[:32, 26] = 0.0
+    obs[32:48, 17:21] = [1.0, 0.0, 0.0, 0.0]  # model 1 at a zero command: the braking actor's
+    obs[32:48, 26] = 0.0
     slope = rng.uniform(-0.1, 0.1, 64)
     wide = np.concatenate([obs[:, :26], -np.sin(slope)[:, None], -np.cos(slope)[:, None],
                            obs[:, 26:]], axis=1)  # fmt: skip
@@ -304,6 +306,8 @@ def test_a_network_with_a_standing_branch_widens_to_the_same_function(tmp_path):
         x_new = torch.as_tensor(new_norm(wide), dtype=torch.float32)
         assert old.gate(x_old)[:32].all() and not old.gate(x_old)[32:].any()
         assert torch.equal(new.gate(x_new), old.gate(x_old))
+        assert old.brake_gate(x_old)[32:48].all() and not old.brake_gate(x_old)[:32].any()
+        assert torch.equal(new.brake_gate(x_new), old.brake_gate(x_old))
         v_old, v_new = old.predict_values(x_old), new.predict_values(x_new)
         f_old, f_new = old.extract_features(x_old), new.extract_features(x_new)
         b_old, b_new = old.branch_values(f_old), new.branch_values(f_new)  # every row
@@ -314,6 +318,7 @@ def test_a_network_with_a_standing_branch_widens_to_the_same_function(tmp_path):
         assert (a - b).abs().max() < 1e-4 * (1 + a.abs().max())
     assert (m_old - m_new).abs().max() < 1e-5  # the standing head on every row
     assert (a_old - a_new).abs().max() < 1e-5  # actions: the same function, gravity weight 0
+    assert old.brake_branch and new.brake_branch  # the published network brakes with its own actor
 
 
 def test_tracking_config_trains_evaluates_without_reference_starts_and_compares(
