@@ -10,6 +10,8 @@ from training.ppo.config import PPOConfig
 def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     """The PPO model of a config, with fresh weights.
 
+    SB3's PPO as :class:`training.ppo.lean.LeanPPO` runs it (the same numbers, less Python).
+
     ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
     With ``stand_std_nm`` the policy is :class:`training.ppo.exploration.StandNoisePolicy`
     (the same weights as ``MlpPolicy``; a fixed noise on the rows commanded to stand); with
@@ -17,8 +19,9 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     ``stand_gamma``, its rows' own discount:
     :class:`training.ppo.stand_branch.BranchDiscountBuffer`).
     """
-    from stable_baselines3 import PPO
     from stable_baselines3.common.utils import LinearSchedule
+
+    from training.ppo.lean import LeanPPO
 
     policy_kwargs = cfg.policy_kwargs()
     policy = "MlpPolicy"
@@ -48,7 +51,7 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
     if cfg.teacher and mean is not None:
         policy_kwargs["features_extractor_kwargs"] = {"mean": list(mean), "var": list(var)}
-    return PPO(
+    return LeanPPO(
         policy,
         vecnorm,
         n_steps=cfg.n_steps,
@@ -130,10 +133,10 @@ def training_env(
     normalised (:func:`training.ppo.exploration.pin_command`); with ``stand_branch_from`` the
     observation statistics stay the start's (the branch's input map is exact for them).
     """
-    from stable_baselines3.common.vec_env import VecNormalize
+    from training.ppo.sb3_vec import BatchVecNormalize
 
     venv = monitored_env(cfg, seed, monitor_file, env_threads)
-    vecnorm = VecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
+    vecnorm = BatchVecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
     if cfg.pins_command:
         from training.ppo.exploration import pin_command
 

@@ -12,6 +12,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv as _SB3VecEnv
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
@@ -235,3 +236,34 @@ class BatchedSB3VecEnv(_SB3VecEnv):
     def env_is_wrapped(self, wrapper_class, indices=None):
         """The batch has no per-env Gymnasium wrappers."""
         return [False for _ in self._get_indices(indices)]
+
+
+class BatchVecNormalize(VecNormalize):
+    """SB3's VecNormalize whose step normalises the finished episodes' last observations at once.
+
+    SB3 normalises each ``terminal_observation`` by its own call (a deep copy and five numpy
+    calls per finished episode: most of its time early in a run, when episodes are short);
+    here one call takes them all. The operations are elementwise, so every number is the same
+    (``tests/test_lean_ppo.py``). Statistics, settings and saving are VecNormalize's.
+    """
+
+    def step_wait(self):
+        """VecNormalize.step_wait, the terminal observations normalised in one batch."""
+        obs, rewards, dones, infos = self.venv.step_wait()
+        self.old_obs = obs
+        self.old_reward = rewards
+        if self.training and self.norm_obs:
+            self.obs_rms.update(obs)
+        obs = self.normalize_obs(obs)
+        if self.training:
+            self._update_reward(rewards)
+        rewards = self.normalize_reward(rewards)
+        rows = [i for i in np.flatnonzero(dones).tolist() if "terminal_observation" in infos[i]]
+        if rows and self.norm_obs:
+            last = self._normalize_obs(
+                np.stack([infos[i]["terminal_observation"] for i in rows]), self.obs_rms
+            ).astype(np.float32)
+            for k, i in enumerate(rows):
+                infos[i]["terminal_observation"] = last[k]
+        self.returns[dones] = 0
+        return obs, rewards, dones, infos
