@@ -2,6 +2,8 @@
 
     git worktree add /tmp/base COMMIT
     python -m benchmarks.bench_ab --other /tmp/base [--rounds 3]
+    python -m benchmarks.bench_ab --other /tmp/base --ppo training/configs/ppo_gait_50hz.toml \
+        [--ppo-threads 2 2] [--ppo-steps 131072] [--rounds 3]
 
 Each round runs one process per checkout (this one, then the other; ``PYTHONPATH`` picks the
 checkout, one numba thread each) that times, after a warm-up: ``env.step`` on the exploration
@@ -11,10 +13,19 @@ workload, and ``env.step`` on the walking workload (the model controller's recor
 replayed from the same seed: no reset). Prints every round and the best of each (the
 machine's slow spells only add time). A guardrail of the env's refactors: within 10% of the
 commit before.
+
+With ``--ppo CONFIG`` it times PPO instead, as ``python -m training.ppo.train --config CONFIG``
+learns (:func:`benchmarks.bench_ppo.ppo_breakdown`, the same code run in each checkout's
+process: the model and env as that checkout builds them): its env-steps/s with the env on
+``--ppo-threads``' first number of numba threads and the updates on its second number of torch
+threads, and where its wall time goes (the compiled period, the rest of the env, SB3's
+wrappers, the rollout's network passes, the updates). Prints every round, the best of each and
+the ratio of the best rates.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import subprocess
@@ -72,11 +83,46 @@ print(json.dumps({"single_random_us": single_random(), "batched_random_steps_s":
 """
 
 
-def _time(checkout: Path) -> dict:
-    env = {**os.environ, "PYTHONPATH": str(checkout), "NUMBA_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, "-c", _TIMER], cwd=checkout, env=env,
-                         capture_output=True, text=True, check=True)  # fmt: skip
+_PPO_TIMER = """
+import json, sys
+from training.plumbing.common import parse_config
+from training.ppo.config import PPOConfig
+{source}
+config, steps, env_threads, update_threads = sys.argv[1], *map(int, sys.argv[2:5])
+cfg = parse_config(PPOConfig, ["--config", config], "bench")
+print(json.dumps(ppo_breakdown(cfg, steps, env_threads, update_threads)))
+"""
+
+
+def _time(checkout: Path, ppo: tuple | None = None) -> dict:
+    """One timing process in ``checkout``: the env's rows, or PPO's (``ppo``: config, steps,
+    env threads, update threads)."""
+    env = {**os.environ, "PYTHONPATH": str(checkout),
+           "NUMBA_NUM_THREADS": "1" if ppo is None else str(max(ppo[2], 1))}  # fmt: skip
+    if ppo is None:
+        cmd = [sys.executable, "-c", _TIMER]
+    else:
+        from benchmarks.bench_ppo import ppo_breakdown
+
+        code = _PPO_TIMER.format(source=inspect.getsource(ppo_breakdown))
+        cmd = [sys.executable, "-c", code, *map(str, ppo)]
+    out = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"bench_ab: the timing in {checkout} failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _ppo_table(rows: dict, here: Path, other: Path) -> None:
+    """The best rate of each checkout, its shares, and the ratio."""
+    from benchmarks.bench_ppo import format_shares
+
+    best = {name: max(rs, key=lambda r: r["rate"]) for name, rs in rows.items()}
+    print("| checkout | PPO [env-steps/s] | where the wall time goes (its best round) |")
+    print("|---|---|---|")
+    for name, path in (("this", here), ("other", other)):
+        b = best[name]
+        print(f"| {name} ({path}) | {b['rate']:,.0f} | {format_shares(b['shares'])} |")
+    print(f"this / other: {best['this']['rate'] / best['other']['rate']:.2f}x")
 
 
 @command("bench_ab")
@@ -84,19 +130,32 @@ def main(argv=None) -> int:
     ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("--other", type=Path, required=True, help="another checkout of the project")
     ap.add_argument("--rounds", type=int_in(1, 100), default=3, help="alternating rounds")
+    ap.add_argument("--ppo", default=None, metavar="CONFIG",
+                    help="time PPO with this train_ppo config instead of the env")
+    ap.add_argument("--ppo-steps", type=int_in(4096, 10**8), default=131072,
+                    help="env steps per PPO timing")
+    ap.add_argument("--ppo-threads", type=int_in(1, 64), nargs=2, default=(1, 2),
+                    metavar=("ENV", "UPDATES"),
+                    help="numba threads of the env, torch threads of the updates")  # fmt: skip
     a = ap.parse_args(argv)
     here = Path(__file__).resolve().parents[1]
     if not (a.other / "biped_constraint_env" / "__init__.py").is_file():
         ap.error(f"--other {a.other}: not a checkout of this project")
+    if a.ppo is not None and not (here / a.ppo).is_file():
+        ap.error(f"--ppo {a.ppo}: no such config")
+    ppo = None if a.ppo is None else (a.ppo, a.ppo_steps, *a.ppo_threads)
     for checkout in (here, a.other):  # compile each checkout's core outside the timing
         _time(checkout)
     rows: dict[str, list[dict]] = {"this": [], "other": []}
     t0 = time.time()
     for k in range(a.rounds):
         for name, checkout in (("this", here), ("other", a.other)):
-            rows[name].append(_time(checkout))
+            rows[name].append(_time(checkout, ppo))
             print(f"round {k + 1} {name}: {json.dumps(rows[name][-1])} ({time.time() - t0:.0f} s)",
                   flush=True)  # fmt: skip
+    if ppo is not None:
+        _ppo_table(rows, here, a.other)
+        return 0
     best = {
         name: {
             "single_random_us": min(r["single_random_us"] for r in rs),

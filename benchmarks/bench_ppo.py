@@ -50,8 +50,73 @@ def _config(path: str, overrides: Sequence[str] = ()):
     return parse_config(PPOConfig, ["--config", path, *overrides], "bench")
 
 
-SHARES: dict[str, tuple[float, float]] = {}
-"""The last timing's (env share, update share) of its wall time, by row."""
+SHARES: dict[str, dict[str, float]] = {}
+"""The last timing's shares of its wall time (:data:`PARTS`), by row."""
+
+PARTS = ("physics", "env", "wrappers", "rollout", "updates")
+"""Where PPO's wall time goes: the compiled period (``physics``: dynamics, events, the compiled
+observation and reward record); the rest of the batched env's step and resets (``env``: the
+Python and numpy parts, the SB3 VecEnv adapter); SB3's VecMonitor and VecNormalize
+(``wrappers``); the rollout's network passes, buffer and callbacks (``rollout``: the rest of the
+rollouts); PPO's updates (``updates``: ``model.train``)."""
+
+
+def ppo_breakdown(cfg, steps: int, env_threads: int, update_threads: int, barrier=None,
+                  seed: int = 0) -> dict:  # fmt: skip
+    """Env steps per second of PPO.learn on the batched env, and where its wall time goes.
+
+    Builds the model as ``training.ppo.train`` does (``make_model``, ``training_env``), learns
+    one rollout as a warm-up, then ``steps`` env steps timed; returns ``{"rate": env-steps/s,
+    "shares": {part: share of the wall time}}`` (:data:`PARTS`). Self-contained: it uses only
+    what every checkout of the project has, so ``benchmarks.bench_ab`` runs it on another.
+    ``barrier``: a multiprocessing barrier that the timed learning waits on after the warm-up
+    (two processes side by side start timing together).
+    """
+    import tempfile as _tempfile
+    import time as _time
+    from pathlib import Path as _Path
+
+    import torch
+
+    from training.ppo.build import make_model, training_env
+    from training.ppo.callbacks import update_threads as threads_callback
+
+    torch.set_num_threads(1)
+    venv, vecnorm = training_env(cfg, seed, env_threads=env_threads)
+    with _tempfile.TemporaryDirectory() as tmp:
+        model = make_model(cfg, vecnorm, _Path(tmp))
+        callback = threads_callback(1, update_threads)
+        model.learn(total_timesteps=cfg.n_envs * cfg.n_steps, callback=callback)  # warm-up
+        if barrier is not None:
+            barrier.wait()
+        spent = dict.fromkeys(("physics", "inner", "outer", "updates"), 0.0)
+        inner = venv.venv  # the SB3 adapter of the batched env, under the VecMonitor
+        buf = inner.venv.core.buf
+
+        def timed(what, fn):
+            def run(*args, **kwargs):
+                t = _time.perf_counter()
+                try:
+                    return fn(*args, **kwargs)
+                finally:
+                    spent[what] += _time.perf_counter() - t
+
+            return run
+
+        buf.period = timed("physics", buf.period)
+        inner.step_wait = timed("inner", inner.step_wait)
+        vecnorm.step_wait = timed("outer", vecnorm.step_wait)
+        model.train = timed("updates", model.train)
+        t0 = _time.perf_counter()
+        model.learn(total_timesteps=steps, reset_num_timesteps=False, callback=callback)
+        wall = _time.perf_counter() - t0
+    torch.set_num_threads(1)
+    venv.close()
+    parts = {"physics": spent["physics"], "env": spent["inner"] - spent["physics"],
+             "wrappers": spent["outer"] - spent["inner"], "updates": spent["updates"]}  # fmt: skip
+    parts["rollout"] = wall - sum(parts.values())
+    order = ("physics", "env", "wrappers", "rollout", "updates")  # PARTS (self-contained)
+    return {"rate": steps / wall, "shares": {k: parts[k] / wall for k in order}}
 
 
 def ppo_steps_per_s(
@@ -60,49 +125,19 @@ def ppo_steps_per_s(
 ) -> float:  # fmt: skip
     """Env steps per second of PPO.learn on the batched env (rollouts and updates).
 
-    ``barrier``: a multiprocessing barrier that the timed learning waits on after the warm-up
-    (two processes side by side start timing together). ``shares``: a row name under which
-    the timed learning's shares of wall time go to :data:`SHARES`: the env's (the batched
-    env's steps: physics, observation, reward, resets) and PPO's updates (``model.train``); the
-    rest is the rollout's network passes and SB3's bookkeeping.
+    :func:`ppo_breakdown`'s rate; ``shares``: a row name under which its shares of the wall
+    time go to :data:`SHARES`.
     """
-    import torch
+    out = ppo_breakdown(cfg, steps, env_threads, update_threads, barrier, seed)
+    if shares is not None:
+        SHARES[shares] = out["shares"]
+    return out["rate"]
 
-    from training.ppo.build import make_model, training_env
-    from training.ppo.callbacks import update_threads as threads_callback
 
-    torch.set_num_threads(1)
-    venv, vecnorm = training_env(cfg, seed, env_threads=env_threads)
-    with tempfile.TemporaryDirectory() as tmp:
-        model = make_model(cfg, vecnorm, Path(tmp))
-        callback = threads_callback(1, update_threads)
-        model.learn(total_timesteps=cfg.n_envs * cfg.n_steps, callback=callback)  # warm-up
-        if barrier is not None:
-            barrier.wait()
-        spent = {"env": 0.0, "update": 0.0}
-        inner = venv.venv  # the batched env under the VecMonitor
-        step_wait, train = inner.step_wait, model.train
-
-        def timed(what, fn):
-            def run(*args, **kwargs):
-                t = time.perf_counter()
-                try:
-                    return fn(*args, **kwargs)
-                finally:
-                    spent[what] += time.perf_counter() - t
-
-            return run
-
-        inner.step_wait, model.train = timed("env", step_wait), timed("update", train)
-        t0 = time.perf_counter()
-        model.learn(total_timesteps=steps, reset_num_timesteps=False, callback=callback)
-        wall = time.perf_counter() - t0
-        rate = steps / wall
-        if shares is not None:
-            SHARES[shares] = (spent["env"] / wall, spent["update"] / wall)
-    torch.set_num_threads(1)
-    venv.close()
-    return rate
+def format_shares(share: dict) -> str:
+    """The shares of a PPO timing's wall time in words."""
+    return ("of its wall time: " + ", ".join(f"{k} {share[k]:.0%}" for k in PARTS)
+            + f"; the env in all {share['physics'] + share['env']:.0%}")  # fmt: skip
 
 
 def _side_by_side_worker(config: str, overrides, steps: int, seed: int, barrier, out) -> None:
@@ -188,14 +223,7 @@ def main(argv=None) -> int:
     )
     for key, rate in best.items():
         share = SHARES.get(key)
-        extra = (
-            ""
-            if share is None
-            else (
-                f" (of its wall time: the env {share[0]:.0%}, PPO's updates {share[1]:.0%}, the "
-                f"rollout's network passes and the rest {1 - sum(share):.0%}; last round)"
-            )
-        )
+        extra = "" if share is None else f" ({format_shares(share)}; last round)"
         print(f"{key}: {rate:,.0f} env-steps/s{extra}")
     return 0
 

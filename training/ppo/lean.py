@@ -5,7 +5,9 @@ callbacks, logger records and rollout buffer) whose ``collect_rollouts`` and ``t
 the policy's forward pass, its Gaussian's samples, log-probabilities and entropy with the same
 torch operations in the same order as SB3's ``ActorCriticPolicy`` and ``DiagGaussianDistribution``,
 without building a ``torch.distributions.Normal`` (and validating its arguments) per call nor
-going through ``nn.Module.__call__`` per layer. A run's weights, normaliser and logs are bit for
+going through ``nn.Module.__call__`` per layer; its minibatches are gathered by torch from the
+buffer's tensors (:func:`minibatches`) and Adam steps all parameters at once (torch's
+``foreach`` implementation, the same arithmetic per element). A run's weights, normaliser and logs are bit for
 bit those of SB3's PPO (``tests/test_lean_ppo.py`` trains both side by side).
 
 It applies to the plain actor-critic: SB3's ``ActorCriticPolicy`` class itself with a diagonal
@@ -23,6 +25,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.buffers import RolloutBuffer
+from stable_baselines3.common.type_aliases import RolloutBufferSamples
 from stable_baselines3.common.distributions import DiagGaussianDistribution
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import FlattenExtractor
@@ -130,6 +133,31 @@ class _Forward:
         return values, log_prob, entropy
 
 
+_FIELDS = ("observations", "actions", "values", "log_probs", "advantages", "returns")
+
+
+def minibatches(buffer: RolloutBuffer, batch_size: int):
+    """``RolloutBuffer.get(batch_size)``'s minibatches: the same permutation and values.
+
+    The flattened buffer becomes tensors once, and each minibatch is gathered from them by
+    torch, instead of numpy fancy indexing and a copy into a new tensor per field.
+    """
+    assert buffer.full, ""
+    n = buffer.buffer_size * buffer.n_envs
+    indices = np.random.permutation(n)  # SB3's draw, from numpy's global generator
+    if not buffer.generator_ready:
+        for name in _FIELDS:
+            buffer.__dict__[name] = buffer.swap_and_flatten(buffer.__dict__[name])
+        buffer.generator_ready = True
+    data = [th.as_tensor(buffer.__dict__[name]) for name in _FIELDS]
+    obs, actions = data[0], data[1].float()  # SB3 casts the actions to float32
+    flat = [t.reshape(n) for t in data[2:]]  # SB3 flattens the (n, 1) columns
+    order = th.as_tensor(indices)
+    for start in range(0, n, batch_size):
+        idx = order[start : start + batch_size]
+        yield RolloutBufferSamples(obs[idx], actions[idx], *(t[idx] for t in flat))
+
+
 class LeanPPO(PPO):
     """SB3's PPO, its rollouts and updates computed leanly (see the module docstring)."""
 
@@ -200,9 +228,13 @@ class LeanPPO(PPO):
         entropy_losses, pg_losses, value_losses, clip_fractions = [], [], [], []
         continue_training = True
         params = list(self.policy.parameters())
+        optimizer = self.policy.optimizer
+        if type(optimizer) is th.optim.Adam:  # torch's multi-tensor Adam: the same numbers
+            for group in optimizer.param_groups:
+                group["foreach"] = True
         for epoch in range(self.n_epochs):
             approx_kl_divs = []
-            for rollout_data in self.rollout_buffer.get(self.batch_size):
+            for rollout_data in minibatches(self.rollout_buffer, self.batch_size):
                 values, log_prob, entropy = fwd.evaluate(
                     rollout_data.observations, rollout_data.actions
                 )
@@ -237,10 +269,10 @@ class LeanPPO(PPO):
                         print(f"Early stopping at step {epoch} due to reaching max kl: "
                               f"{approx_kl_div:.2f}")  # fmt: skip
                     break
-                self.policy.optimizer.zero_grad()
+                optimizer.zero_grad()
                 loss.backward()
                 th.nn.utils.clip_grad_norm_(params, self.max_grad_norm)
-                self.policy.optimizer.step()
+                optimizer.step()
             self._n_updates += 1
             if not continue_training:
                 break
