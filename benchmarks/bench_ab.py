@@ -123,6 +123,10 @@ def _ppo_table(rows: dict, here: Path, other: Path) -> None:
         b = best[name]
         print(f"| {name} ({path}) | {b['rate']:,.0f} | {format_shares(b['shares'])} |")
     print(f"this / other: {best['this']['rate'] / best['other']['rate']:.2f}x")
+    digests = {r["sha256"] for rs in rows.values() for r in rs}
+    print("the same numbers in both checkouts (weights and normaliser after the timed steps: "
+          f"one SHA-256 in every round): {'yes' if len(digests) == 1 else 'no'} "
+          f"({', '.join(sorted(d[:12] for d in digests))})")  # fmt: skip
 
 
 @command("bench_ab")

@@ -67,11 +67,14 @@ def ppo_breakdown(cfg, steps: int, env_threads: int, update_threads: int, barrie
 
     Builds the model as ``training.ppo.train`` does (``make_model``, ``training_env``), learns
     one rollout as a warm-up, then ``steps`` env steps timed; returns ``{"rate": env-steps/s,
-    "shares": {part: share of the wall time}}`` (:data:`PARTS`). Self-contained: it uses only
+    "shares": {part: share of the wall time}, "sha256": the digest of the weights and the
+    normaliser's statistics at the end}`` (:data:`PARTS`; the same config, seed, threads and
+    steps in two checkouts give the same digest where they compute the same numbers). Self-contained: it uses only
     what every checkout of the project has, so ``benchmarks.bench_ab`` runs it on another.
     ``barrier``: a multiprocessing barrier that the timed learning waits on after the warm-up
     (two processes side by side start timing together).
     """
+    import hashlib as _hashlib
     import tempfile as _tempfile
     import time as _time
     from pathlib import Path as _Path
@@ -110,13 +113,19 @@ def ppo_breakdown(cfg, steps: int, env_threads: int, update_threads: int, barrie
         t0 = _time.perf_counter()
         model.learn(total_timesteps=steps, reset_num_timesteps=False, callback=callback)
         wall = _time.perf_counter() - t0
+    digest = _hashlib.sha256()  # what the run computed: its weights and normaliser
+    for value in model.policy.state_dict().values():
+        digest.update(value.detach().numpy().tobytes())
+    for rms in (vecnorm.obs_rms, vecnorm.ret_rms):
+        digest.update(rms.mean.tobytes() + rms.var.tobytes())
     torch.set_num_threads(1)
     venv.close()
     parts = {"physics": spent["physics"], "env": spent["inner"] - spent["physics"],
              "wrappers": spent["outer"] - spent["inner"], "updates": spent["updates"]}  # fmt: skip
     parts["rollout"] = wall - sum(parts.values())
     order = ("physics", "env", "wrappers", "rollout", "updates")  # PARTS (self-contained)
-    return {"rate": steps / wall, "shares": {k: parts[k] / wall for k in order}}
+    return {"rate": steps / wall, "shares": {k: parts[k] / wall for k in order},
+            "sha256": digest.hexdigest()}  # fmt: skip
 
 
 def ppo_steps_per_s(

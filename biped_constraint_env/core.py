@@ -382,11 +382,13 @@ class EnvCore:
             return self.buf.obs[0].copy()
         return self.observation(rngs)[0]
 
-    def info(self, row: int | None = None) -> dict[str, Any]:
+    def info(self, row: int | None = None, keys: tuple | None = None) -> dict[str, Any]:
         """The last period's (or reset's) ``info``.
 
         ``row`` None: one array per key (entry i: env i), as the vector env gives it; a row
         index: that row's values as Python scalars and tuples, as the single env gives them.
+        ``keys`` (with ``row`` None): only these keys (a subset of :attr:`info_keys`, checked
+        by the caller), the events decoded only if asked for.
         """
         sim, one = self.sim, row is not None
         if one:
@@ -407,8 +409,9 @@ class EnvCore:
             events = np.empty(self.n, dtype=object)
             switches[:] = [()] * self.n
             events[:] = [()] * self.n
-            for i in np.flatnonzero(sim.n_events[: self.n]):
-                switches[i], events[i] = event_infos(_event_rows(sim, i))
+            if keys is None or "switches" in keys or "events" in keys:
+                for i in np.flatnonzero(sim.n_events[: self.n]):
+                    switches[i], events[i] = event_infos(_event_rows(sim, i))
             mode, side, steps = sim.ist[:, :3].T.copy()  # ST_MODE, ST_SIDE, ST_STEPS: 0, 1, 2
             out = {"mode": mode, "stance_side": side, "steps_completed": steps,
                    "t": sim.fst[:, FS_T].copy(), "hip_y": self.hip[:, 0].copy(),
@@ -419,6 +422,6 @@ class EnvCore:
                    "motor_work_abs_j": sim.fst[:, FS_WORK_ABS].copy(),
                    "damping_loss_j": sim.fst[:, FS_DAMPED].copy()}  # fmt: skip
             out.update(zip(self.reward_keys, self._terms.T.copy(), strict=True))
-        for keys, values in self._extras:
-            out.update(zip(keys, values(row), strict=True))
-        return out
+        for names, values in self._extras:
+            out.update(zip(names, values(row), strict=True))
+        return out if keys is None else {k: out[k] for k in keys}

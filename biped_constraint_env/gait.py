@@ -32,6 +32,8 @@ from .rewards import REWARD_KINDS, RewardSettings, RewardTerm
 
 SWING_MODELS = (1, 2)
 """The models in which the swing leg is free (its foot off the ground)."""
+_SWINGING = np.isin(np.arange(5), SWING_MODELS)  # indexed by the model, 1-4
+_SWINGING.flags.writeable = False
 
 
 @dataclass(frozen=True)
@@ -87,7 +89,7 @@ def height_term(r, p: Period) -> np.ndarray:
 def swing_term(r, p: Period) -> np.ndarray:
     """Models 1, 2: the swing ankle moving forward at the command or target; models 3, 4: 1."""
     short = np.minimum(p.swing_vy - reference_speed(r, p, "swing"), 0.0)
-    return np.where(np.isin(p.modes, SWING_MODELS), kernel(r, "swing", short), 1.0)
+    return np.where(_SWINGING[p.modes], kernel(r, "swing", short), 1.0)
 
 
 def cadence_targets(r, p: Period, stretch=1.0) -> np.ndarray:

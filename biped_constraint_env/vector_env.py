@@ -25,6 +25,7 @@ from .core import EnvCore
 from .model import N_ACTUATED
 from .settings import make_settings
 from .starts import state_from_options
+from .state import FS_T
 from .validation import check_int, check_seeds
 
 MAX_NUM_ENVS = 1_000_000
@@ -43,6 +44,9 @@ class ConstrainedBipedVectorEnv(VectorEnv):
             is in ``info["final_obs"]`` and its last info in ``info["final_info"]``, as
             Stable-Baselines3's VecEnv expects).
         num_threads: numba threads of the compiled period (1: serial).
+        info_keys: the ``info`` keys each reset and step returns (None, the default: every
+            key, ``core.info_keys``); a learner that reads a few asks for those alone, and the
+            others (the events' decoding above all) are not computed.
         **kwargs: the single environment's keyword arguments (``render_mode`` excepted),
             validated once into ``settings`` (:mod:`.settings`).
     """
@@ -55,6 +59,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         num_threads: int = 1,
+        info_keys: tuple[str, ...] | None = None,
         **kwargs: Any,
     ):
         """Create the batch."""
@@ -77,6 +82,15 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self.settings = make_settings(**kwargs)
         s = self.settings
         self.core = EnvCore(s, num_envs, num_threads)
+        if info_keys is not None:
+            if isinstance(info_keys, str) or not all(isinstance(k, str) for k in info_keys):
+                raise ValueError(f"info_keys must be a sequence of key names, got {info_keys!r}")
+            unknown = [k for k in info_keys if k not in self.core.info_keys]
+            if unknown:
+                raise ValueError(f"info_keys {unknown} are not keys of this env's info "
+                                 f"{self.core.info_keys}")  # fmt: skip
+            info_keys = tuple(dict.fromkeys(info_keys))
+        self.info_keys = info_keys
         self.num_envs = num_envs
         self.num_threads = num_threads
         self.max_episode_steps = max_episode_steps
@@ -139,7 +153,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         self.core.buf.observe()
         self.core.clear_period()
         self._needs_reset = False
-        return self.core.observation(self._rngs), self._masked(self.core.info())
+        return self.core.observation(self._rngs), self._masked(self.core.info(keys=self.info_keys))
 
     def step(self, actions):
         """Step every sub-environment (autoreset as ``autoreset_mode`` says)."""
@@ -160,13 +174,13 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         rewards = rewards.copy()  # the core's may be a view the next period overwrites
         self._elapsed += 1
         self._elapsed[resetting] = 0
-        infos = self.core.info()
+        infos = self.core.info(keys=self.info_keys)
         truncated = np.zeros(self.num_envs, bool)
         if self.max_episode_steps is not None:
             truncated = (self._elapsed >= self.max_episode_steps) & ~terminated
         limit = self.settings.time_limit_s
         if limit is not None:
-            truncated |= (infos["t"] >= limit - 1e-9) & ~terminated
+            truncated |= (self.core.sim.fst[:, FS_T] >= limit - 1e-9) & ~terminated
         done = np.flatnonzero(terminated | truncated)
         obs = self.core.observation(self._rngs)
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP and done.size:

@@ -148,3 +148,68 @@ def _run_kw(mode, kw, steps=60, seed=3):
         R.append(r)
         T.append(te | tr)
     return np.array(obs_seq), np.array(R), np.array(T)
+
+
+def test_info_keys_give_those_keys_with_the_same_values_and_refuse_unknown_ones():
+    kw = {"dt": 0.02, "observation": ["phase"], "reward": {"kind": "gait"}}
+    keys = ("steps_completed", "hip_y", "termination_reason")
+    out = []
+    for info_keys in (None, keys):
+        venv = gym.make_vec("ConstrainedBiped-v0", 4, vectorization_mode="vector_entry_point",
+                            autoreset_mode="SameStep", info_keys=info_keys, **kw)  # fmt: skip
+        _, info = venv.reset(seed=5)
+        rows = [info]
+        rng = np.random.default_rng(1)
+        for _ in range(30):  # random torques: episodes end and restart
+            rows.append(venv.step(rng.uniform(-20, 20, (4, 5)))[4])
+        out.append(rows)
+    ended = 0
+    for full, few in zip(*out, strict=True):
+        assert {k for k in few if not k.startswith("_")} <= set(keys) | {"final_obs",
+                                                                      "final_info"}  # fmt: skip
+        for k in keys:
+            np.testing.assert_array_equal(full[k], few[k])
+        if "final_info" in few:
+            ended += 1
+            for i in np.flatnonzero(few["_final_info"]):
+                assert few["final_info"][i] == {k: full["final_info"][i][k] for k in keys}
+    assert ended > 0
+    for bad, match in ((("hip_y", "nope"), "nope"), ("hip_y", "sequence"), ((1,), "sequence")):
+        with pytest.raises(ValueError, match=match):
+            gym.make_vec("ConstrainedBiped-v0", 2, vectorization_mode="vector_entry_point",
+                         info_keys=bad)  # fmt: skip
+
+
+def test_the_sb3_adapter_gives_the_single_envs_numbers_and_infos():
+    """BatchedSB3VecEnv (the batched env, its few info keys) against SB3's DummyVecEnv of
+    single envs: observations, rewards, dones and every info entry a learner reads."""
+    from training.ppo.sb3_vec import make_sb3_vec_env
+
+    kw = {"dt": 0.02, "observation": ["phase"], "reward": {"kind": "gait", "gated": True},
+          "start": {"stride": 0.75, "midstride": 0.25}}  # fmt: skip
+    runs = []
+    for vec in ("batched", "dummy"):
+        venv = make_sb3_vec_env(4, 11, kw, vec, max_episode_steps=12)
+        rows = [venv.reset()]
+        rng = np.random.default_rng(2)
+        for _ in range(60):  # about the recipes' first actions: some fall, some reach the limit
+            a = np.array([0.08, 0, 0, 0, 0]) + rng.uniform(-0.01, 0.01, (4, 5))
+            rows.append(venv.step(a.astype(np.float32)))
+        venv.close()
+        runs.append(rows)
+    np.testing.assert_array_equal(runs[0][0], runs[1][0].astype(np.float32))
+    truncated = ended = 0
+    for (o1, r1, d1, i1), (o2, r2, d2, i2) in zip(runs[0][1:], runs[1][1:], strict=True):
+        np.testing.assert_array_equal(o1, o2.astype(np.float32))
+        np.testing.assert_array_equal(r1, r2.astype(np.float32))
+        np.testing.assert_array_equal(d1, d2)
+        for a, b in zip(i1, i2, strict=True):
+            for k in ("steps_completed", "hip_y", "termination_reason"):
+                assert a[k] == b[k], k
+            if "terminal_observation" in b:
+                ended += 1
+                truncated += b["TimeLimit.truncated"]
+                assert a["TimeLimit.truncated"] == b["TimeLimit.truncated"]
+                np.testing.assert_array_equal(a["terminal_observation"],
+                                              b["terminal_observation"].astype(np.float32))
+    assert ended > truncated > 0

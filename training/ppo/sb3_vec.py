@@ -109,6 +109,7 @@ def make_sb3_vec_env(
             vectorization_mode="vector_entry_point",
             autoreset_mode=AutoresetMode.SAME_STEP,
             num_threads=num_threads,
+            info_keys=BatchedSB3VecEnv.INFO_KEYS,
             **limit_kw,
             **env_kwargs,
         )
@@ -166,6 +167,9 @@ class BatchedSB3VecEnv(_SB3VecEnv):
     ``steps_completed``, ``hip_y`` and ``termination_reason``.
     """
 
+    INFO_KEYS = ("steps_completed", "hip_y", "termination_reason")
+    """The env's ``info`` keys each info carries (the batched env computes only these)."""
+
     def __init__(self, venv, action_map=None):
         """Wrap ``venv`` (a ConstrainedBipedVectorEnv in SAME_STEP autoreset mode)."""
         from gymnasium import spaces
@@ -196,23 +200,14 @@ class BatchedSB3VecEnv(_SB3VecEnv):
         obs, rew, term, trunc, info = self.venv.step(self._actions)
         self._obs = obs  # SAME_STEP: already the next episode's first observation where done
         dones = term | trunc
-        infos = []
-        for i in range(self.num_envs):
-            d = {
-                "steps_completed": int(info["steps_completed"][i]),
-                "hip_y": float(info["hip_y"][i]),
-                "termination_reason": info["termination_reason"][i],
-            }
-            if dones[i]:
-                d["terminal_observation"] = info["final_obs"][i].astype(np.float32)
-                d["TimeLimit.truncated"] = bool(trunc[i] and not term[i])
-                fi = info["final_info"][i]
-                d.update(
-                    steps_completed=int(fi["steps_completed"]),
-                    hip_y=float(fi["hip_y"]),
-                    termination_reason=fi["termination_reason"],
-                )
-            infos.append(d)
+        cols = [info[k].tolist() for k in self.INFO_KEYS]  # Python ints, floats, names
+        infos = [dict(zip(self.INFO_KEYS, row, strict=True)) for row in zip(*cols, strict=True)]
+        for i in np.flatnonzero(dones).tolist():
+            d, fi = infos[i], info["final_info"][i]
+            d["terminal_observation"] = info["final_obs"][i].astype(np.float32)
+            d["TimeLimit.truncated"] = bool(trunc[i] and not term[i])
+            d.update(steps_completed=int(fi["steps_completed"]), hip_y=float(fi["hip_y"]),
+                     termination_reason=fi["termination_reason"])  # fmt: skip
         return obs.astype(np.float32), rew.astype(np.float32), dones, infos
 
     def close(self):
