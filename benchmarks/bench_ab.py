@@ -140,7 +140,11 @@ def main(argv=None) -> int:
                     help="env steps per PPO timing")
     ap.add_argument("--ppo-threads", type=int_in(1, 64), nargs=2, default=(1, 2),
                     metavar=("ENV", "UPDATES"),
-                    help="numba threads of the env, torch threads of the updates")  # fmt: skip
+                    help="numba threads of the env, torch threads of the updates")
+    ap.add_argument("--other-ppo-threads", type=int_in(1, 64), nargs=2, default=None,
+                    metavar=("ENV", "UPDATES"),
+                    help="the other checkout's (default: --ppo-threads), e.g. to time each "
+                         "checkout's README command")  # fmt: skip
     a = ap.parse_args(argv)
     here = Path(__file__).resolve().parents[1]
     if not (a.other / "biped_constraint_env" / "__init__.py").is_file():
@@ -148,16 +152,20 @@ def main(argv=None) -> int:
     if a.ppo is not None and not (here / a.ppo).is_file():
         ap.error(f"--ppo {a.ppo}: no such config")
     ppo = None if a.ppo is None else (a.ppo, a.ppo_steps, *a.ppo_threads)
+    other_threads = a.ppo_threads if a.other_ppo_threads is None else a.other_ppo_threads
+    other_ppo = None if a.ppo is None else (a.ppo, a.ppo_steps, *other_threads)
     for checkout in (here, a.other):  # compile each checkout's core outside the timing
         _time(checkout)
     rows: dict[str, list[dict]] = {"this": [], "other": []}
     t0 = time.time()
     for k in range(a.rounds):
-        for name, checkout in (("this", here), ("other", a.other)):
-            rows[name].append(_time(checkout, ppo))
+        for name, checkout, how in (("this", here, ppo), ("other", a.other, other_ppo)):
+            rows[name].append(_time(checkout, how))
             print(f"round {k + 1} {name}: {json.dumps(rows[name][-1])} ({time.time() - t0:.0f} s)",
                   flush=True)  # fmt: skip
     if ppo is not None:
+        print(f"PPO on {a.ppo}, {a.ppo_steps} env steps timed after one rollout; threads "
+              f"(env, updates): this {tuple(a.ppo_threads)}, other {tuple(other_threads)}")
         _ppo_table(rows, here, a.other)
         return 0
     best = {

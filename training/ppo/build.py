@@ -10,7 +10,8 @@ from training.ppo.config import PPOConfig
 def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     """The PPO model of a config, with fresh weights.
 
-    SB3's PPO as :class:`training.ppo.lean.LeanPPO` runs it (the same numbers, less Python).
+    Adam steps all parameters at once (torch's multi-tensor ``foreach`` step: the same numbers
+    as its default one-tensor-at-a-time step on the CPU, faster; ``tests/test_speed_exact.py``).
 
     ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
     With ``stand_std_nm`` the policy is :class:`training.ppo.exploration.StandNoisePolicy`
@@ -19,11 +20,10 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     ``stand_gamma``, its rows' own discount:
     :class:`training.ppo.stand_branch.BranchDiscountBuffer`).
     """
+    from stable_baselines3 import PPO
     from stable_baselines3.common.utils import LinearSchedule
 
-    from training.ppo.lean import LeanPPO
-
-    policy_kwargs = cfg.policy_kwargs()
+    policy_kwargs = {**cfg.policy_kwargs(), "optimizer_kwargs": {"foreach": True}}
     policy = "MlpPolicy"
     if cfg.stand_std_nm > 0:
         import numpy as np
@@ -51,7 +51,7 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
     if cfg.teacher and mean is not None:
         policy_kwargs["features_extractor_kwargs"] = {"mean": list(mean), "var": list(var)}
-    return LeanPPO(
+    return PPO(
         policy,
         vecnorm,
         n_steps=cfg.n_steps,
