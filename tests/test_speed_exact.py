@@ -41,15 +41,7 @@ def _train(fast: bool, cfg, tmp_path, steps, monkeypatch):
             init = ConstrainedBipedVectorEnv.__init__
             m.setattr(ConstrainedBipedVectorEnv, "__init__",
                       lambda self, *a, info_keys=None, **kw: init(self, *a, **kw))  # fmt: skip
-            real = build.make_model
-
-            def sb3_model(*a, **kw):  # the default Adam (one tensor at a time)
-                model = real(*a, **kw)
-                for group in model.policy.optimizer.param_groups:
-                    group["foreach"] = None
-                return model
-
-            m.setattr(build, "make_model", sb3_model)
+            m.setattr(build, "OPTIMIZER_KWARGS", None)  # SB3's default Adam
         venv, vecnorm = build.training_env(cfg, cfg.seed, env_threads=2 if fast else 1)
         model = build.make_model(cfg, vecnorm, tmp_path / str(fast))
         assert (type(vecnorm) is VecNormalize) != fast

@@ -7,11 +7,17 @@ from pathlib import Path
 from training.ppo.config import PPOConfig
 
 
+OPTIMIZER_KWARGS = {"eps": 1e-5, "foreach": True}
+"""The Adam of every run: SB3's own (its ``eps``, 1e-5, which SB3 sets only where no
+``optimizer_kwargs`` are given) stepping all parameters at once (torch's multi-tensor
+``foreach`` step: the same numbers as the one-tensor-at-a-time default on the CPU, faster;
+``tests/test_speed_exact.py`` trains both). None: SB3's default Adam."""
+
+
 def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     """The PPO model of a config, with fresh weights.
 
-    Adam steps all parameters at once (torch's multi-tensor ``foreach`` step: the same numbers
-    as its default one-tensor-at-a-time step on the CPU, faster; ``tests/test_speed_exact.py``).
+    Adam: :data:`OPTIMIZER_KWARGS`.
 
     ``mean``, ``var``: the statistics of the in-network normaliser (runs with a teacher).
     With ``stand_std_nm`` the policy is :class:`training.ppo.exploration.StandNoisePolicy`
@@ -23,7 +29,9 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import LinearSchedule
 
-    policy_kwargs = {**cfg.policy_kwargs(), "optimizer_kwargs": {"foreach": True}}
+    policy_kwargs = cfg.policy_kwargs()
+    if OPTIMIZER_KWARGS is not None:
+        policy_kwargs["optimizer_kwargs"] = dict(OPTIMIZER_KWARGS)
     policy = "MlpPolicy"
     if cfg.stand_std_nm > 0:
         import numpy as np

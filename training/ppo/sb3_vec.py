@@ -239,7 +239,7 @@ class BatchVecNormalize(VecNormalize):
     SB3 normalises each ``terminal_observation`` by its own call (a deep copy and five numpy
     calls per finished episode: most of its time early in a run, when episodes are short);
     here one call takes them all. The operations are elementwise, so every number is the same
-    (``tests/test_lean_ppo.py``). Statistics, settings and saving are VecNormalize's.
+    (``tests/test_speed_exact.py``). Statistics, settings and saving are VecNormalize's.
     """
 
     def step_wait(self):
