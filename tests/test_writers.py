@@ -1066,3 +1066,72 @@ def test_a_runs_command_txt_pastes_back_as_it_ran(tmp_path):
     (path,) = (tmp_path / "train_ppo").iterdir()
     words = shlex.split((path / "command.txt").read_text())
     assert words[1:3] == ["-m", "training.train_ppo"] and words[3:] == argv
+
+
+def test_a_recorded_empty_folder_is_not_deleted_with_what_a_run_put_in_it(tmp_path):
+    """Finding: an output record listing an empty folder of this command made its next run
+    delete that folder after moving its new files in (theirs and another command's)."""
+    out = tmp_path / "out"
+    with command_output(out, "cmd_a") as co:
+        co.dir("figures")  # an empty folder: recorded as "figures/"
+        co.dir().write("a.json", "1")
+    assert json.loads((out / MARKER).read_text())["files"]["figures/"] == "cmd_a"
+    with command_output(out, "cmd_b") as co:
+        co.dir("figures").write("b.png", "theirs")
+    with command_output(out, "cmd_a") as co:
+        co.dir("figures").write("a.png", "new")
+    assert (out / "figures" / "a.png").read_text() == "new"
+    assert (out / "figures" / "b.png").read_text() == "theirs"
+    with command_output(out, "cmd_c") as co:  # a command's empty folder, then not written again
+        co.dir("empty")
+    with command_output(out, "cmd_c") as co:
+        co.dir().write("c.txt", "3")
+    assert not (out / "empty").exists() and (out / "c.txt").read_text() == "3"
+
+
+def test_a_crafted_record_cannot_claim_a_users_file_nor_a_changed_one(tmp_path):
+    """Finding: a crafted .written_by.json claimed a user's file for a command (which then
+    replaced or deleted it); the record now holds each file's SHA-256, and a file whose content
+    is not what the command wrote is foreign."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "thesis.txt").write_text("precious")
+    (out / MARKER).write_text(json.dumps({"files": {"thesis.txt": "cmd_a"}}))
+    with pytest.raises(UntrustedFileError, match="thesis.txt"), command_output(out, "cmd_a"):
+        pass
+    (out / MARKER).write_text(json.dumps({"files": {"thesis.txt": "cmd_a"},
+                                          "sha256": {"thesis.txt": "0" * 64}}))  # fmt: skip
+    with pytest.raises(UntrustedFileError, match="thesis.txt"), command_output(out, "cmd_a"):
+        pass
+    assert (out / "thesis.txt").read_text() == "precious"
+    other = tmp_path / "other"
+    with command_output(other, "cmd_a") as co:
+        co.dir().write("a.json", "1")
+    with command_output(other, "cmd_a") as co:  # as it wrote it: its own, replaced
+        co.dir().write("a.json", "2")
+    (other / "a.json").write_text("edited by hand")
+    with pytest.raises(UntrustedFileError, match="changed since"), command_output(other, "cmd_a"):
+        pass
+    assert (other / "a.json").read_text() == "edited by hand"
+
+
+def test_a_whole_directory_command_holds_only_the_names_it_writes(tmp_path):
+    """Finding: a record {"*": command} skipped the foreign-file check for that command."""
+    out = tmp_path / "sweep"
+    with command_output(out, "sweep", whole=("tune", "results.csv")):
+        (out / "tune").mkdir()
+        (out / "results.csv").write_text("seed\n0\n")
+    with command_output(out, "sweep", whole=("tune", "results.csv")):  # its own: again
+        pass
+    crafted = tmp_path / "crafted"
+    crafted.mkdir()
+    (crafted / "notes.txt").write_text("mine")
+    (crafted / MARKER).write_text(json.dumps({"files": {"*": "sweep"}}))
+    with pytest.raises(UntrustedFileError, match="notes.txt"), command_output(
+        crafted, "sweep", whole=("tune", "results.csv")
+    ):
+        pass
+    with pytest.raises(UntrustedFileError, match="the output of sweep"), command_output(
+        out, "evaluate"
+    ):
+        pass

@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import hashlib
 import io
 import json
 import os
@@ -389,6 +390,10 @@ def _listing(d: OutDir, prefix: str = "", skip: set[str] | None = None) -> list[
 
 
 def _remove_rel(out: OutDir, rel: str) -> None:
+    """Delete the file ``rel`` below ``out``, or the folder ``rel`` ("name/") if it is empty.
+
+    A folder that holds anything (another command's files, or this run's own) stays.
+    """
     parts = rel.rstrip("/").split("/")
     d = out
     try:
@@ -396,23 +401,53 @@ def _remove_rel(out: OutDir, rel: str) -> None:
             if d.kind(part) != "dir":
                 return
             d = d.subdir(part, create=False)
-        if d.kind(parts[-1]) == "file" or rel.endswith("/"):
+        kind = d.kind(parts[-1])
+        if rel.endswith("/"):
+            if kind == "dir":
+                os.rmdir(parts[-1], dir_fd=d.fd)  # only an empty folder: OSError otherwise
+        elif kind == "file":
             d.remove(parts[-1])
     except (OSError, ValueError):
         pass
 
 
-def _read_marker(out: OutDir) -> dict[str, str]:
+def _read_marker(out: OutDir) -> tuple[dict[str, str], dict[str, str]]:
+    """(files: {relative path: command}, sha256: {relative path: digest}) of the record."""
     if out.kind(MARKER) is None:
-        return {}
+        return {}, {}
     text = out.read_text(MARKER)
     try:
-        files = json.loads(text)["files"]
-        if not all(isinstance(k, str) and isinstance(v, str) for k, v in files.items()):
-            raise TypeError
+        record = json.loads(text)
+        files, digests = record["files"], record.get("sha256", {})
+        for table in (files, digests):
+            if not all(isinstance(k, str) and isinstance(v, str) for k, v in table.items()):
+                raise TypeError
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError):
         raise OutputError(f"{out.path / MARKER}: not this package's output record") from None
-    return dict(files)
+    return dict(files), dict(digests)
+
+
+def _sha256(d: OutDir, rel: str) -> str | None:
+    """The SHA-256 of the plain file ``rel`` below ``d`` (None: not a plain file there)."""
+    parts = rel.split("/")
+    opened = []
+    try:
+        for part in parts[:-1]:
+            if d.kind(part) != "dir":
+                return None
+            d = d.subdir(part, create=False)
+            opened.append(d)
+        if d.kind(parts[-1]) != "file":
+            return None
+        fd = d._open_regular(parts[-1], os.O_RDONLY)
+        h = hashlib.sha256()
+        with os.fdopen(fd, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        return h.hexdigest()
+    finally:
+        for sub in opened:
+            sub.close()
 
 
 class CommandOutput:
@@ -422,8 +457,10 @@ class CommandOutput:
     it) to write into with :class:`OutDir`'s methods.
     """
 
-    def __init__(self, out: OutDir, command: str, owned: dict[str, str], staged: bool = True):
+    def __init__(self, out: OutDir, command: str, owned: dict[str, str],
+                 digests: dict[str, str] | None = None, staged: bool = True):  # fmt: skip
         self.out, self.command, self.owned = out, command, owned
+        self.digests = dict(digests or {})
         self.path = out.path
         self.stage_name = ""
         self.stage = out
@@ -454,58 +491,71 @@ class CommandOutput:
             if dst.kind(parts[-1]) == "dir":
                 dst.remove(parts[-1])
             src.replace(parts[-1], parts[-1], into=dst)
-        files = dict(self.owned)
+        files, digests = dict(self.owned), dict(self.digests)
         for rel, cmd in self.owned.items():  # this command's files of an earlier run, not rewritten
             if cmd == self.command and rel not in written:
                 _remove_rel(self.out, rel)
                 del files[rel]
+                digests.pop(rel, None)
         files.update({rel: self.command for rel in written})
-        self.out.write(MARKER, json.dumps({"files": files}, indent=1, sort_keys=True) + "\n")
+        for rel in written:
+            if not rel.endswith("/"):
+                digests[rel] = _sha256(self.out, rel)
+        self.out.write(MARKER, json.dumps({"files": files, "sha256": digests}, indent=1,
+                                          sort_keys=True) + "\n")  # fmt: skip
         self.out.fsync()
         return written
 
 
 WHOLE = "*"
 """A marker entry naming the command that owns the whole directory (a tool that writes into
-it itself, as Ray Tune does)."""
+it itself, as Ray Tune does); the command names the entries it may hold (``whole``)."""
 
 
 @contextlib.contextmanager
 def command_output(
-    path: Path, command: str, whole: bool = False, keep_on_interrupt: bool = False
+    path: Path, command: str, whole: tuple[str, ...] = (), keep_on_interrupt: bool = False
 ) -> Iterator[CommandOutput]:
     """The ``--out`` directory of ``command``: checked before the work, filled after it.
 
-    ``path`` must be new, empty, or hold only files listed in its :data:`MARKER` (written by
-    commands of this package); anything else (a policy, a run, a user's files, a link) is
-    refused with one line before any work is done. On success the staged files replace the
-    same names of an earlier run and the marker records them; on any exception or interrupt
-    the staging directory is deleted and the directory is as it was (with
-    ``keep_on_interrupt``, Ctrl-C still moves in what was written so far).
+    ``path`` must be new, empty, or hold only files that commands of this package wrote there
+    and that are as they wrote them: each listed in its :data:`MARKER` with its SHA-256 (a
+    record cannot claim a file it did not write, nor one changed since); anything else (a
+    policy, a run, a user's files, a link) is refused with one line before any work is done.
+    On success the staged files replace the same names of an earlier run and the marker
+    records them; on any exception or interrupt the staging directory is deleted and the
+    directory is as it was (with ``keep_on_interrupt``, Ctrl-C still moves in what was written
+    so far).
 
-    ``whole``: the command owns the whole directory (a library writes into it directly):
-    the marker says so before the work and :meth:`CommandOutput.dir` is the directory itself.
-    A directory owned whole by another command, or holding anything unlisted, is refused.
+    ``whole``: the top-level names a command that owns the whole directory writes itself (a
+    library writes into it directly, as Ray Tune does): the marker says so before the work,
+    :meth:`CommandOutput.dir` is the directory itself, and the directory may hold nothing but
+    those names (whatever its record says). A directory owned whole by another command, or
+    holding anything else, is refused.
     """
     out = OutDir.open(path)
     try:
-        owned = _read_marker(out)
+        owned, digests = _read_marker(out)
         if owned.get(WHOLE, command) != command:
             raise OutputError(f"{path}: the output of {owned[WHOLE]}, not of {command}; give "
                               f"a new or empty --out directory")  # fmt: skip
         stagings = {n for n in out.names() if _STAGING_RE.fullmatch(n) and out.kind(n) == "dir"}
-        if WHOLE not in owned:
+        if whole:
+            foreign = [n for n in out.names()
+                       if n != MARKER and n not in stagings and n not in whole]  # fmt: skip
+        else:
             foreign = [
                 rel
                 for rel in _listing(out, skip=stagings)
-                if rel != MARKER and rel not in owned and not rel.endswith("/")
-            ]  # an empty folder holds nothing to protect
-            if foreign:
-                more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
-                raise OutputError(
-                    f"{path}: holds {foreign[0]}{more}, which no command of this package wrote "
-                    f"there; give a new or empty --out directory"
-                )
+                if rel != MARKER and not rel.endswith("/")  # an empty folder: nothing to protect
+                and (rel not in owned or digests.get(rel) != _sha256(out, rel))
+            ]
+        if foreign:
+            more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+            raise OutputError(
+                f"{path}: holds {foreign[0]}{more}, which no command of this package wrote "
+                f"there (or changed since); give a new or empty --out directory"
+            )
         for name in stagings:  # a killed command's staging (its pid gone): ours by its name
             if not _alive(int(_STAGING_RE.fullmatch(name).group(1))):
                 out.remove(name)
@@ -516,7 +566,7 @@ def command_output(
             out.write(MARKER, json.dumps({"files": {WHOLE: command}}) + "\n")
             yield CommandOutput(out, command, owned, staged=False)
             return
-        co = CommandOutput(out, command, owned)
+        co = CommandOutput(out, command, owned, digests)
         try:
             yield co
             if interrupts.received():  # a Ctrl-C that Python dropped (raised in a finaliser)

@@ -170,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     if not name.replace("-", "").replace("_", "").replace(".", "").isalnum() or name[0] == ".":
         ap.error(f"--name {name!r}: letters, digits, '-', '_' and '.' only")
     storage = (a.out_dir / name).resolve()
-    with command_output(storage, "sweep", whole=True):
+    with command_output(storage, "sweep", whole=("tune", "results.csv")):
         pass  # claimed for the sweep (refused: another command's or a user's folder)
     combos = [dict(zip(grid, values, strict=True)) for values in itertools.product(*grid.values())]
     space = {
