@@ -90,6 +90,37 @@ def parse_assignment(item: str, flag: str) -> tuple[str, Any]:
     return key.strip(), parsed
 
 
+def _toml_kind_ok(kind: Any, value: Any) -> bool:
+    """Whether a TOML value has the field's type (a string is no number, a number no bool)."""
+    if kind is bool:
+        return isinstance(value, bool)
+    if kind in (int, float):
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if kind in (str, Path):
+        return isinstance(value, str)
+    if getattr(kind, "__origin__", None) is tuple:
+        return isinstance(value, list) and all(_toml_kind_ok(kind.__args__[0], v) for v in value)
+    if kind is dict:
+        return isinstance(value, dict)
+    return True
+
+
+def check_toml_kinds(cls: type, data: dict[str, Any], source: str) -> None:
+    """Refuse a config file's value of the wrong TOML type (``stop_evals = "2"``): ValueError.
+
+    Flags arrive as text and are converted; a file's values are typed, and a string where a
+    number belongs (or a number where a boolean belongs) is a mistake, not a spelling.
+    """
+    hints = get_type_hints(cls)
+    names = {"int": "an integer", "float": "a number", "bool": "true or false",
+             "str": "a string", "Path": "a path (a string)", "dict": "a table"}  # fmt: skip
+    for key, value in data.items():
+        kind = hints.get(key)
+        if kind is not None and not _toml_kind_ok(kind, value):
+            want = names.get(getattr(kind, "__name__", ""), "a list")
+            raise ValueError(f"{source}: {key} must be {want}, got {value!r}")
+
+
 def config_from_mapping(cls: type[C], data: dict[str, Any], source: str) -> C:
     """``cls`` from a mapping (a TOML file's): unknown keys and bad values raise ValueError.
 
@@ -305,6 +336,7 @@ def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> 
     if args.config is not None:
         try:
             values.update(read_config_file(Path(args.config)))
+            check_toml_kinds(cls, values, str(args.config))
         except (UntrustedFileError, ValueError) as e:
             parser.error(f"--config: {e}")
     hints = get_type_hints(cls)

@@ -605,7 +605,7 @@ def read_config(run: Path):
     (:meth:`PPOConfig.check_untrusted`: the registered env id, the package's own controller
     and reference names, no path).
     """
-    from training.plumbing.common import config_from_mapping
+    from training.plumbing.common import check_toml_kinds, config_from_mapping
     from training.ppo.config import PPOConfig
 
     run = Path(run)
@@ -617,6 +617,7 @@ def read_config(run: Path):
     data = read_toml(path, run)
     data.pop("out_dir", None)  # where it was written: never used from a loaded config
     try:
+        check_toml_kinds(PPOConfig, data, str(path))
         cfg = config_from_mapping(PPOConfig, data, str(path))
         cfg.check_untrusted()
     except ValueError as e:
