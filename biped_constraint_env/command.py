@@ -138,16 +138,24 @@ def split_reset_options(
     if not isinstance(options, dict) or "command" not in options:
         return options, None
     rest = {k: v for k, v in options.items() if k != "command"}
-    value = options["command"]
+    return (rest or None), check_commands(options["command"], n, "reset option 'command'")
+
+
+def check_commands(value: Any, n: int | None = None, what: str = "command"):
+    """Commanded speeds given by a user: one real number (a float), or with ``n`` (a batch's
+    rows) one per row (an (n,) array), each :func:`check_command`'s.
+
+    ``set_command`` and ``reset(options={"command": ...})`` both take them so: a string, a
+    boolean, a list for one env or a value beyond :data:`MAX_COMMAND_M_S` is refused.
+    """
     if isinstance(value, np.ndarray) and value.ndim == 0:
         value = value.item()  # numpy's 0-d array: one value
-    if n is None or np.ndim(value) == 0:
-        return (rest or None), check_command(value)
-    values = np.asarray(value)
-    if values.shape != (n,):
-        raise ValueError(f"reset option 'command' must be one value or one per row ({n}), "
-                         f"got shape {values.shape}")  # fmt: skip
-    return (rest or None), np.array([check_command(x) for x in values.tolist()])
+    if n is None or not isinstance(value, list | tuple | np.ndarray):
+        return check_command(value)
+    shape = value.shape if isinstance(value, np.ndarray) else (len(value),)
+    if shape != (n,):
+        raise ValueError(f"{what} must be one value or one per row ({n}), got shape {shape}")
+    return np.array([check_command(x) for x in list(value)])
 
 
 class Commands:

@@ -121,15 +121,7 @@ class EnvCore:
         self.command_reward = (CommandReward(s.reward, p.dt, n) if s.reward.kind == "command"
                                else None)  # fmt: skip
         self.reward = REWARD_PARTS[s.reward.kind]()
-        self.terminations = terminations(self)
-        # the parts this env has, chosen once here: what runs before a period, after it, in
-        # the observation and in ``info`` (the methods below only run the lists)
-        self._before = self._before_hooks()
-        self._after = self._after_hooks()
-        self._blocks = self._observation_blocks()
-        self._post_obs = [self.perturb.observe] if s.perturbations.obs_noise is not None else []
-        self._plain_obs = not self._blocks and not self._post_obs  # the compiled one as it is
-        self._extras = self._info_extras()
+        self._bind_parts()
         self.reward_keys = s.reward.info_keys
         self.info_keys = (
             BASE_INFO_KEYS + self.reward_keys + tuple(k for keys, _ in self._extras for k in keys)
@@ -142,6 +134,31 @@ class EnvCore:
         self._one = np.zeros(1, bool)  # the single env's terminated flag, reused
         self._posture = np.array(s.start.posture, dtype=np.float64)  # the rest posture (q)
         self._posture.flags.writeable = False
+
+    _BOUND = ("terminations", "_before", "_after", "_blocks", "_post_obs", "_plain_obs",
+              "_extras")  # fmt: skip
+    """What :meth:`_bind_parts` builds: functions bound to this core's parts."""
+
+    def _bind_parts(self) -> None:
+        """The parts this env has, chosen once: what runs before a period, after it, in the
+        observation and in ``info`` (the methods below only run the lists)."""
+        s = self.settings
+        self.terminations = terminations(self)
+        self._before = self._before_hooks()
+        self._after = self._after_hooks()
+        self._blocks = self._observation_blocks()
+        self._post_obs = [self.perturb.observe] if s.perturbations.obs_noise is not None else []
+        self._plain_obs = not self._blocks and not self._post_obs  # the compiled one as it is
+        self._extras = self._info_extras()
+
+    def __getstate__(self) -> dict:
+        """The core's state without the functions bound to its parts (closures: rebuilt)."""
+        return {k: v for k, v in self.__dict__.items() if k not in self._BOUND}
+
+    def __setstate__(self, state: dict) -> None:
+        """Restore the state, then bind the parts' functions to this core (a copy's own)."""
+        self.__dict__.update(state)
+        self._bind_parts()
 
     # ------------------------------------------------------------------ starts
     def draw_starts(self, idx: np.ndarray, rngs, command: float | np.ndarray | None = None) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .actions import validate_action
-from .command import split_reset_options
+from .command import check_commands, split_reset_options
 from .core import EnvCore
 from .model import N_ACTUATED
 from .settings import ENV_ARGUMENTS as SETTINGS_ARGUMENTS
@@ -471,7 +471,7 @@ class ConstrainedBipedEnv(gym.Env):
         """
         if self.core.commands is None:
             raise ValueError("set_command needs an env with a command (task='command')")
-        return float(self.core.commands.set(v)[0])
+        return float(self.core.commands.set(check_commands(v))[0])
 
     def render(self):
         """An RGB frame (``rgb_array``) or a window (``human``) of the stick figure."""

@@ -502,7 +502,8 @@ def state_from_options(options: Any) -> SimState:
 
     ValueError, naming the key, on an unknown key, a wrong type, shape or range.
     """
-    check_mapping("reset option(s)", options, RESET_OPTION_KEYS)
+    # "command" is taken out before (split_reset_options): named here for the message
+    check_mapping("reset option(s)", options, (*RESET_OPTION_KEYS, "command"))
     if "q" not in options:
         raise ValueError("reset options must contain 'q' (theta0, q1..q5) [rad]")
     return SimState(

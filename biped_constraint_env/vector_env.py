@@ -20,7 +20,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .actions import validate_actions
-from .command import split_reset_options
+from .command import check_commands, split_reset_options
 from .core import EnvCore
 from .model import N_ACTUATED
 from .settings import make_settings
@@ -132,10 +132,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         """
         if self.core.commands is None:
             raise ValueError("set_command needs an env with a command (task='command')")
-        vals = np.asarray(values, dtype=np.float64)
-        if vals.shape not in ((), (self.num_envs,)):
-            raise ValueError(f"set_command takes one value or {self.num_envs}, got {vals.shape}")
-        return self.core.commands.set(vals)
+        return self.core.commands.set(check_commands(values, self.num_envs, "set_command"))
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         """Reset every sub-environment; ``seed`` s seeds sub-environment i with s + i."""

@@ -523,3 +523,51 @@ def test_with_keys_sets_joystick_options_inside_the_command_and_keeps_the_rest()
     assert out["command"] == {"range": (0.0, 1.0), "deadband": 0.2, "ramp_m_s2": 1.0}
     assert kw["command"] == {"range": (0.0, 1.0)}  # the caller's dict is not changed
     assert with_keys({"task": "command"}, "command", deadband=0.1)["command"] == {"deadband": 0.1}
+
+
+@pytest.mark.parametrize("bad", ["1.0", True, [1.0], np.nan, 6.0, -5.5, None])
+def test_set_command_refuses_what_the_reset_option_refuses(bad):
+    """Finding: set_command took "1.0", True and [1.0] (converted) where reset refused them."""
+    env = gym.make("ConstrainedBiped-v0", task="command")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="command"):
+        env.unwrapped.set_command(bad)
+    with pytest.raises(ValueError, match="command"):
+        env.reset(seed=0, options={"command": bad})
+    venv = gym.make_vec("ConstrainedBiped-v0", 2, vectorization_mode="vector_entry_point",
+                        task="command")  # fmt: skip
+    venv.reset(seed=0)
+    for value in (bad, [bad, 1.0]):
+        with pytest.raises(ValueError, match="command"):
+            venv.unwrapped.set_command(value)
+    assert env.unwrapped.set_command(np.float32(1.0)) == 1.0
+    np.testing.assert_array_equal(venv.unwrapped.set_command([1.0, 0.5]), [1.0, 0.5])
+
+
+def test_a_misspelt_reset_option_names_the_command_among_the_valid_ones():
+    env = gym.make("ConstrainedBiped-v0", task="command")
+    with pytest.raises(ValueError, match="comand.*valid: command, mode"):
+        env.reset(seed=0, options={"comand": 1.0})
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_command_env_pickles_and_copies_into_an_env_of_its_own(how):
+    """Finding: a command-task env could not be pickled (its parts' hooks were closures), and a
+    deep copy's hooks would have run the original's parts."""
+    import copy
+    import pickle
+
+    env = gym.make("ConstrainedBiped-v0", task="command").unwrapped
+    env.reset(seed=3, options={"command": 1.2})
+    twin = pickle.loads(pickle.dumps(env)) if how == "pickle" else copy.deepcopy(env)
+    assert twin.set_command(0.7) == 0.7  # the copy's command only
+    assert env.core.commands.v[0] == 1.2
+    twin.set_command(1.2)
+    acts = np.random.default_rng(0).uniform(-3, 3, (15, 5))
+    for a in acts:
+        o1, r1, t1, u1, i1 = env.step(a)
+        o2, r2, t2, u2, i2 = twin.step(a)
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2 and t1 == t2 and i1["command_m_s"] == i2["command_m_s"] == 1.2
+        if t1 or u1:
+            break
