@@ -788,9 +788,11 @@ def test_a_crafted_published_file_is_refused(tmp_path):
 
     run = tmp_path / "run"
     run.mkdir()
-    (run / "published.json").write_text('{"snapshot": "../../etc", "why": ""}')
-    with pytest.raises(UntrustedFileError, match="snapshot must be one of"):
-        published_snapshot(run)
+    for crafted in ('{"snapshot": "../../etc", "why": ""}', '{"snapshot": ["best"]}',
+                    '{"snapshot": {"best": 1}}', '{"snapshot": "best", "why": ["x"]}'):
+        (run / "published.json").write_text(crafted)  # a list: a traceback before (finding)
+        with pytest.raises(UntrustedFileError, match="snapshot must be one of"):
+            published_snapshot(run)
 
 
 # ------------------------------------------------------------------ the stop rule

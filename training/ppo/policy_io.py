@@ -170,7 +170,8 @@ def published_snapshot(run: Path) -> tuple[str, str]:
     if os.path.lexists(path):
         d = read_json_object(path, Path(run))
         which, why = d.get("snapshot"), d.get("why", "")
-        if which not in SNAPSHOTS or not isinstance(why, str) or len(why) > 500:
+        if (not isinstance(which, str) or which not in SNAPSHOTS or not isinstance(why, str)
+                or len(why) > 500):  # fmt: skip
             raise UntrustedFileError(f"{path}: snapshot must be one of {sorted(SNAPSHOTS)} "
                                      f"with a short why")  # fmt: skip
         return which, why
