@@ -1,4 +1,4 @@
-"""The compiled cache: cleared when any source changed, and a note before a first compile.
+"""The compiled cache: cleared when any source changed, and word of a compile while it runs.
 
 numba checks a cached function against its own source file only, not against the files of
 the functions it calls and compiles in; after an edit to one module (a developer's checkout, a
@@ -12,7 +12,11 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
+import threading
+import time
 from pathlib import Path
+
+from numba.core import event as _event
 
 _PACKAGE = Path(__file__).resolve().parent
 _CACHE = _PACKAGE / "__pycache__"
@@ -42,13 +46,62 @@ def _drop_stale_cache() -> None:
         pass
 
 
+HEARTBEAT_S = 5.0
+"""While numba compiles, a line on stderr at least this often [s]."""
+
+
+class CompileNote(_event.Listener):
+    """Word on stderr while numba compiles (a first use, or a cache dropped by an edit).
+
+    The first compile prints what is happening; while compiles run, a line every
+    :data:`HEARTBEAT_S` seconds gives the time since the first began. A function loaded from
+    the cache is no compile: nothing is printed.
+    """
+
+    def __init__(self, stream=None):
+        """Lines go to ``stream`` (default ``sys.stderr`` at each line)."""
+        self.stream = stream
+        self.depth = 0
+        self.first = None  # when the first compile began
+        self.last = 0.0  # when the last line was printed
+        self.lock = threading.Lock()
+        self.wake = threading.Event()
+        self.thread = None
+
+    def _say(self, text: str) -> None:
+        print(f"biped_constraint_env: {text}", file=self.stream or sys.stderr, flush=True)
+        self.last = time.monotonic()
+
+    def on_start(self, event) -> None:
+        """A compile begins (nested ones counted)."""
+        with self.lock:
+            self.depth += 1
+            if self.first is None:
+                self.first = time.monotonic()
+                self._say("compiling the simulator core (once per installation: 1-3 min on "
+                          "2 cores, then cached)")  # fmt: skip
+            if self.thread is None:
+                self.thread = threading.Thread(target=self._beat, daemon=True,
+                                               name="compile-note")  # fmt: skip
+                self.thread.start()
+
+    def on_end(self, event) -> None:
+        """A compile ends."""
+        with self.lock:
+            self.depth -= 1
+
+    def _beat(self) -> None:
+        while not self.wake.wait(min(0.5, HEARTBEAT_S / 4)):
+            with self.lock:
+                now = time.monotonic()
+                if self.depth > 0 and now - self.last >= HEARTBEAT_S:
+                    self._say(f"still compiling: {now - self.first:.0f} s since the first "
+                              f"compile began")  # fmt: skip
+
+
+NOTE = CompileNote()
+_event.register("numba:compile", NOTE)
+
 if not os.environ.get("NUMBA_CACHE_DIR"):
     if _CACHE.is_dir():
         _drop_stale_cache()
-    if not any(_CACHE.glob("*.nbi")):
-        print(
-            "biped_constraint_env: no compiled cache yet; the first simulation compiles the core "
-            "(30-60 s, once per installation)",
-            file=sys.stderr,
-            flush=True,
-        )
