@@ -1137,3 +1137,37 @@ def test_a_whole_directory_command_holds_only_the_names_it_writes(tmp_path):
         out, "evaluate"
     ):
         pass
+
+
+def test_a_command_that_fails_leaves_no_output_folder_it_made(tmp_path):
+    """Finding: an interrupted evaluation said its --out was as it was, yet left it created
+    and empty."""
+    out = tmp_path / "new" / "out"
+    for exc in (KeyboardInterrupt, RuntimeError):
+        with pytest.raises(exc), command_output(out, "evaluate") as co:
+            co.dir().write("half.json", "{}")
+            raise exc
+        assert not out.exists()
+    out.mkdir(parents=True)  # one the user made: stays
+    with pytest.raises(RuntimeError), command_output(out, "evaluate"):
+        raise RuntimeError
+    assert out.is_dir()
+
+
+def test_evaluate_refuses_a_wrong_path_or_out_before_loading_anything(tmp_path, capsys):
+    """Findings: a wrong policy path first printed a snapshot line and loaded for seconds; a
+    refused --out came after the policy and the simulator were loaded."""
+    with pytest.raises(SystemExit):
+        evaluate.main([str(tmp_path / "nope")])
+    out, err = capsys.readouterr()
+    assert "no such directory" in err and "snapshot" not in out and "loading" not in out
+    with pytest.raises(SystemExit):
+        evaluate.main([str(ROOT / "policies" / "ppo_gait_50hz"), "--out", str(ROOT / "policies")])
+    out, err = capsys.readouterr()
+    assert "--out" in err and "loading" not in out
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(SystemExit):
+        evaluate.main([str(ROOT / "policies" / "ppo_gait_50hz"), "--out",
+                       str(tmp_path / "afile" / "sub")])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert "not a directory" in err and "loading" not in out

@@ -47,7 +47,7 @@ from training.evaluation.rollouts import (
 )
 from training.evaluation.stats import MIN_STEPS, format_success
 from training.plumbing.common import CliParser, command, float_in, int_in
-from training.plumbing.outputs import command_output, write_file
+from training.plumbing.outputs import check_command_output, command_output, write_file
 from training.plumbing.safe_files import UntrustedFileError
 from training.ppo.config import REPORT_EPISODES, REPORT_SEED_OFFSET
 from training.ppo.policy_io import (
@@ -285,6 +285,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error("give a run directory or --controller, not both")
     if args.controller and args.compare:
         ap.error("--compare needs a run directory (its teacher, imitation and stresses)")
+    if args.run_dir is not None and not args.run_dir.is_dir():  # before anything is loaded
+        ap.error(f"{args.run_dir}: no such directory" if not args.run_dir.exists()
+                 else f"{args.run_dir}: not a run directory")  # fmt: skip
+    if args.out is not None:
+        try:
+            check_command_output(args.out, "evaluate")
+        except UntrustedFileError as e:
+            ap.error(f"--out: {e}")
     t0 = time.time()
     print(f"loading {args.run_dir or args.controller} and the simulator", flush=True)
     import torch

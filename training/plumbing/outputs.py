@@ -512,6 +512,51 @@ WHOLE = "*"
 it itself, as Ray Tune does); the command names the entries it may hold (``whole``)."""
 
 
+def _check_output(out: OutDir, command: str, whole: tuple[str, ...]):
+    """(owned, digests, staging folders) of an output ``command`` may write; else refused."""
+    path = out.path
+    owned, digests = _read_marker(out)
+    if owned.get(WHOLE, command) != command:
+        raise OutputError(f"{path}: the output of {owned[WHOLE]}, not of {command}; give "
+                          f"a new or empty --out directory")  # fmt: skip
+    stagings = {n for n in out.names() if _STAGING_RE.fullmatch(n) and out.kind(n) == "dir"}
+    if whole:
+        foreign = [n for n in out.names()
+                   if n != MARKER and n not in stagings and n not in whole]  # fmt: skip
+    else:
+        foreign = [
+            rel
+            for rel in _listing(out, skip=stagings)
+            if rel != MARKER and not rel.endswith("/")  # an empty folder: nothing to protect
+            and (rel not in owned or digests.get(rel) != _sha256(out, rel))
+        ]
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise OutputError(
+            f"{path}: holds {foreign[0]}{more}, which no command of this package wrote "
+            f"there (or changed since); give a new or empty --out directory"
+        )
+    return owned, digests, stagings
+
+
+def check_command_output(path: Path, command: str, whole: tuple[str, ...] = ()) -> None:
+    """Refuse now what :func:`command_output` would refuse, creating nothing.
+
+    A command calls it before its work (loading a policy, compiling) so that a wrong ``--out``
+    costs no time; :func:`command_output` checks again when it writes.
+    """
+    if not os.path.lexists(path):
+        parent = Path(path).parent
+        while not os.path.lexists(parent) and parent != parent.parent:
+            parent = parent.parent
+        if os.path.lexists(parent) and not os.path.isdir(parent):
+            raise OutputError(f"{shown(Path(path))}: cannot create it ({shown(parent)} is not a "
+                              f"directory)")  # fmt: skip
+        return
+    with OutDir.open(path, create=False) as out:
+        _check_output(out, command, whole)
+
+
 @contextlib.contextmanager
 def command_output(
     path: Path, command: str, whole: tuple[str, ...] = (), keep_on_interrupt: bool = False
@@ -524,8 +569,8 @@ def command_output(
     policy, a run, a user's files, a link) is refused with one line before any work is done.
     On success the staged files replace the same names of an earlier run and the marker
     records them; on any exception or interrupt the staging directory is deleted and the
-    directory is as it was (with ``keep_on_interrupt``, Ctrl-C still moves in what was written
-    so far).
+    directory is as it was (a directory made for the command is removed again; with
+    ``keep_on_interrupt``, Ctrl-C still moves in what was written so far).
 
     ``whole``: the top-level names a command that owns the whole directory writes itself (a
     library writes into it directly, as Ray Tune does): the marker says so before the work,
@@ -533,29 +578,11 @@ def command_output(
     those names (whatever its record says). A directory owned whole by another command, or
     holding anything else, is refused.
     """
+    created = not os.path.lexists(path)
     out = OutDir.open(path)
+    done = False
     try:
-        owned, digests = _read_marker(out)
-        if owned.get(WHOLE, command) != command:
-            raise OutputError(f"{path}: the output of {owned[WHOLE]}, not of {command}; give "
-                              f"a new or empty --out directory")  # fmt: skip
-        stagings = {n for n in out.names() if _STAGING_RE.fullmatch(n) and out.kind(n) == "dir"}
-        if whole:
-            foreign = [n for n in out.names()
-                       if n != MARKER and n not in stagings and n not in whole]  # fmt: skip
-        else:
-            foreign = [
-                rel
-                for rel in _listing(out, skip=stagings)
-                if rel != MARKER and not rel.endswith("/")  # an empty folder: nothing to protect
-                and (rel not in owned or digests.get(rel) != _sha256(out, rel))
-            ]
-        if foreign:
-            more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
-            raise OutputError(
-                f"{path}: holds {foreign[0]}{more}, which no command of this package wrote "
-                f"there (or changed since); give a new or empty --out directory"
-            )
+        owned, digests, stagings = _check_output(out, command, whole)
         for name in stagings:  # a killed command's staging (its pid gone): ours by its name
             if not _alive(int(_STAGING_RE.fullmatch(name).group(1))):
                 out.remove(name)
@@ -564,6 +591,7 @@ def command_output(
                 raise OutputError(f"{path}: holds other commands' files; give a new or empty "
                                   f"--out directory")  # fmt: skip
             out.write(MARKER, json.dumps({"files": {WHOLE: command}}) + "\n")
+            done = True
             yield CommandOutput(out, command, owned, staged=False)
             return
         co = CommandOutput(out, command, owned, digests)
@@ -572,15 +600,20 @@ def command_output(
             if interrupts.received():  # a Ctrl-C that Python dropped (raised in a finaliser)
                 raise KeyboardInterrupt
             co._commit()
+            done = True
         except KeyboardInterrupt:
             if keep_on_interrupt:
                 co._commit()
+                done = True
             raise
         finally:
             with contextlib.suppress(OSError):
                 out.remove(co.stage_name)
     finally:
         out.close()
+        if created and not done:  # made for this command, which wrote nothing: gone again
+            with contextlib.suppress(OSError):
+                os.rmdir(path)
 
 
 # ----------------------------------------------------------------------------- the run's lock
