@@ -1,21 +1,28 @@
 """Plain Stable-Baselines3 PPO learns to walk with no recorded motion (docs/sb3.md).
 
-    python examples/train_sb3.py [SEED [ENV_STEPS]]
+    python examples/train_sb3.py [SEED [ENV_STEPS]]    (--help: the options)
 
 The network alone sets the five joint torques every 20 ms; the reward is the task and the
 contact clock (``reward={"kind": "gait", ...}``), the training starts are the env's own
 (``start={"stride": 0.75, "midstride": 0.25}``) and a contact phase held over 1 s ends a
-training episode. SB3's ``PPO``, ``VecNormalize`` and ``EvalCallback`` do the rest, with two
-small callbacks: the discount's ramp and the normaliser saved with the best model.
+training episode. SB3's ``PPO``, ``VecNormalize``, ``EvalCallback`` and ``CheckpointCallback``
+(model and normaliser every 100k env steps) do the rest, with two small callbacks: the
+discount's ramp and the normaliser saved with the best model. Ctrl-C saves the model and the
+normaliser as they are and stops.
 """
 
-import sys
+import argparse
 from pathlib import Path
 
 import numpy as np
 import torch
 from stable_baselines3 import PPO
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
+from stable_baselines3.common.callbacks import (
+    BaseCallback,
+    CallbackList,
+    CheckpointCallback,
+    EvalCallback,
+)
 from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -36,6 +43,8 @@ TRAIN = {**GAIT, "start": {"stride": 0.75, "midstride": 0.25},
 EVAL = {**GAIT, "start": "midstride"}  # the env's own start, strict physics
 EVAL_S = 120.0  # the evaluations' episodes [s]: a walk that lasts them all is selected
 GEAR = 150.0  # N m per unit action (make_sb3_vec_env's default)
+N_ENVS = 64
+CHECKPOINT_EVERY = 100_000  # env steps between checkpoints (model and normaliser)
 
 
 class GammaRamp(BaseCallback):
@@ -94,7 +103,7 @@ def train(
     """
     torch.set_num_threads(1)  # the batched env takes the other core
     out = Path(out)
-    env = make_sb3_vec_env(64, seed, TRAIN, max_episode_steps=round(5 / DT))  # 5 s episodes
+    env = make_sb3_vec_env(N_ENVS, seed, TRAIN, max_episode_steps=round(5 / DT))  # 5 s episodes
     env = VecNormalize(VecMonitor(env, str(out / "monitor.csv")), gamma=0.9606)
     evals = make_sb3_vec_env(10, seed + 1, {**EVAL, "termination": {"time_limit_s": EVAL_S}},
                              max_episode_steps=round(EVAL_S / DT))  # fmt: skip
@@ -113,8 +122,19 @@ def train(
         callback_on_new_best=SaveNormaliser(env, out / "vecnormalize.pkl"),
         callback_after_eval=StopWhenEveryEpisodeLasts(), deterministic=True, verbose=1,
     )  # fmt: skip
-    model.learn(total_timesteps, callback=CallbackList([GammaRamp(env), best]),
-                progress_bar=progress_bar)  # fmt: skip
+    checkpoints = CheckpointCallback(CHECKPOINT_EVERY // N_ENVS, str(out / "checkpoints"),
+                                     save_vecnormalize=True)  # fmt: skip
+    try:
+        model.learn(total_timesteps, callback=CallbackList([GammaRamp(env), best, checkpoints]),
+                    progress_bar=progress_bar)  # fmt: skip
+    except KeyboardInterrupt:  # Ctrl-C: keep what was learned so far, then stop
+        model.save(out / "interrupted_model.zip")
+        env.save(str(out / "interrupted_vecnormalize.pkl"))
+        env.close()
+        raise KeyboardInterrupt(
+            f"interrupted at {model.num_timesteps} env steps: saved {out}/interrupted_model.zip "
+            f"and {out}/interrupted_vecnormalize.pkl"
+        ) from None
     if not (out / "best_model.zip").is_file():  # a budget shorter than one evaluation
         model.save(out / "best_model.zip")
         env.save(str(out / "vecnormalize.pkl"))
@@ -138,10 +158,18 @@ def evaluate(model, normaliser, episodes=200, first_seed=500_000) -> dict:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:] + ["0", "12000000"][len(sys.argv) - 1 :]
-    seed, steps = int(args[0]), int(args[1])
-    out = Path("runs") / f"sb3_example_seed{seed}"
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seed", nargs="?", type=int, default=0, help="training seed (default 0)")
+    ap.add_argument("env_steps", nargs="?", type=int, default=12_000_000,
+                    help="env steps at most (default 12M; it stops once it walks)")  # fmt: skip
+    a = ap.parse_args()
+    if a.env_steps < 1:
+        ap.error("env_steps must be at least 1")
+    out = Path("runs") / f"sb3_example_seed{a.seed}"
     print(f"curves: tensorboard --logdir {out} (and {out}/monitor.csv)")
-    model, normaliser = train(seed, steps, out)
+    try:
+        model, normaliser = train(a.seed, a.env_steps, out)
+    except KeyboardInterrupt as e:
+        raise SystemExit(str(e) or "interrupted") from None
     print(f"saved {out}/best_model.zip and {out}/vecnormalize.pkl")
     print("success (>= 20 steps in 30 s), 95% CI:", format_success(evaluate(model, normaliser)))

@@ -49,3 +49,45 @@ def test_the_example_stops_once_every_evaluation_episode_lasts():
         Parent.evaluations_length.append(lengths)
         verdicts.append(stop._on_step())
     assert verdicts == [True, True, True, False]  # two full evaluations in a row stop it
+
+
+def test_the_example_has_help_and_a_checkpoint_every_100k_env_steps():
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, str(EXAMPLE), "--help"], capture_output=True, text=True,
+                       cwd=ROOT)  # fmt: skip
+    assert r.returncode == 0 and "seed" in r.stdout and "env_steps" in r.stdout  # finding: int()
+    spec = importlib.util.spec_from_file_location("train_sb3", EXAMPLE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.CHECKPOINT_EVERY <= 100_000 and mod.CHECKPOINT_EVERY // mod.N_ENVS >= 1
+
+
+def test_ctrl_c_saves_the_model_so_far_and_says_so_in_one_line(tmp_path):
+    """Finding: Ctrl-C printed a 40-line traceback into the progress bar and saved nothing."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from subprocs import default_sigint
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_NUM_THREADS": "1"}
+    p = subprocess.Popen([sys.executable, str(EXAMPLE), "0", "100000000"], cwd=tmp_path,
+                         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=default_sigint)  # fmt: skip
+    out = tmp_path / "runs" / "sb3_example_seed0"
+    deadline = time.monotonic() + 240
+    while not any(out.glob("PPO_*/events.*")) and time.monotonic() < deadline:
+        time.sleep(0.5)  # learning has begun (its TensorBoard log exists)
+    time.sleep(3)
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 1, stderr[-2000:]
+    assert "Traceback" not in stderr
+    last = [x for x in stderr.strip().splitlines() if x.strip()][-1]
+    assert last.startswith("interrupted at ") and "interrupted_model.zip" in last
+    assert (out / "interrupted_model.zip").is_file()
+    assert (out / "interrupted_vecnormalize.pkl").is_file()
