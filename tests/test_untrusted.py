@@ -30,14 +30,14 @@ from training.ppo import train as train_ppo
 from training.ppo.policy_io import write_manifest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRATCH = ROOT / "policies" / "ppo_from_scratch"
+SCRATCH = ROOT / "policies" / "ppo_gait_50hz"  # a committed policy
 
 
 @pytest.fixture
 def policy(tmp_path, monkeypatch):
-    """A copy of the committed from-scratch policy (no figures), the cwd a scratch folder."""
+    """A copy of a committed policy (its final/ snapshot, no figures), the cwd a scratch folder."""
     run = tmp_path / "policies" / "evil"
-    shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best"))
+    shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best", "published.json"))
     monkeypatch.chdir(tmp_path)
     return run
 

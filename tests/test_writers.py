@@ -43,7 +43,7 @@ from training.ppo.policy_io import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRATCH = ROOT / "policies" / "ppo_from_scratch"
+SCRATCH = ROOT / "policies" / "ppo_gait_50hz"  # a committed policy
 SMALL = ["--n-envs", "2", "--n-steps", "128", "--batch-size", "128", "--n-epochs", "1"]
 SMALL += ["--eval-episodes", "1", "--progress", "false"]
 VICTIM_TEXT = "precious\n"
@@ -359,11 +359,11 @@ def test_a_kill_campaign_leaves_exactly_the_final_runs_evaluations(tmp_path):
 def test_evaluate_out_never_deletes_a_policy_folder(tmp_path):
     """Finding 2: ``--out policies`` removed all six committed policies."""
     policies = tmp_path / "policies"
-    shutil.copytree(SCRATCH, policies / "ppo_from_scratch", ignore=shutil.ignore_patterns("fig*"))
+    shutil.copytree(SCRATCH, policies / "ppo_gait_50hz", ignore=shutil.ignore_patterns("fig*"))
     before = sorted(str(p) for p in policies.rglob("*"))
-    for out in (policies, policies / "ppo_from_scratch", policies / "ppo_from_scratch" / "final"):
+    for out in (policies, policies / "ppo_gait_50hz", policies / "ppo_gait_50hz" / "final"):
         with pytest.raises(SystemExit) as e:
-            evaluate.main([str(policies / "ppo_from_scratch"), "--episodes", "1", "--out",
+            evaluate.main([str(policies / "ppo_gait_50hz"), "--episodes", "1", "--out",
                            str(out)])  # fmt: skip
         _one_line_refusal(e, "no command of this package wrote there")
     assert sorted(str(p) for p in policies.rglob("*")) == before
@@ -619,7 +619,7 @@ def test_a_load_during_a_replacement_never_mixes_two_snapshots(tmp_path):
     from training.ppo.policy_io import build_policy, read_config, save_snapshot
 
     run = tmp_path / "run"
-    shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best"))
+    shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best", "published.json"))
     cfg = read_config(run)
     policy = build_policy(cfg)
 
@@ -912,7 +912,7 @@ def test_a_dead_commands_staging_is_cleaned_and_a_live_ones_kept(tmp_path):
     assert not dead.exists() and live.exists()
 
 
-def _policy_copy(tmp_path: Path, name: str = "ppo_from_scratch") -> Path:
+def _policy_copy(tmp_path: Path, name: str = "ppo_gait_50hz") -> Path:
     run = tmp_path / "p"
     shutil.copytree(ROOT / "policies" / name, run, ignore=shutil.ignore_patterns("figures"))
     return run
