@@ -9,6 +9,7 @@ cases rewrite the manifest after tampering: the checks behind it must hold on th
 from __future__ import annotations
 
 import io
+import hashlib
 import json
 import os
 import shutil
@@ -222,7 +223,7 @@ def test_bad_state_files_are_refused(policy, tmp_path, state, match):
     [
         ("n_envs = 'abc'\n", "n_envs must be an integer"),
         ("n_envs = 0\n", "n-envs must be in"),
-        ("net_arch = [[1, 2]]\n", "net_arch must be a number"),
+        ("net_arch = [[1, 2]]\n", "net_arch must be a list"),
         ("surprise = 1\n", "unknown keys ['surprise']"),
         ("gamma = inf\n", "gamma must be finite"),
         ("x = [\n", "not valid TOML"),
@@ -358,7 +359,9 @@ def test_an_interrupted_evaluation_leaves_the_old_output(tmp_path, sig):
     out = tmp_path / "eval"
     out.mkdir()
     (out / "evaluation.json").write_text('{"old": true}\n')
-    (out / MARKER).write_text('{"files": {"evaluation.json": "evaluate"}}\n')
+    digest = hashlib.sha256((out / "evaluation.json").read_bytes()).hexdigest()
+    (out / MARKER).write_text(json.dumps({"files": {"evaluation.json": "evaluate"},
+                                          "sha256": {"evaluation.json": digest}}))  # fmt: skip
     proc = _evaluate_proc(out, tmp_path)
     t0 = time.time()
     while not list(out.glob(".staging-*/figures")):
