@@ -89,7 +89,7 @@ def test_misspelt_kwarg_lists_the_valid_names():
         ({"q": POSTURE, "qd": [1e300] * 6}, "qd"),
         ({"q": POSTURE, "qd": [float("nan")] * 6}, "qd"),
         ({"q": POSTURE, "root_y": "0"}, "root_y"),
-        ({"q": POSTURE, "velocity": 0}, "valid: mode, q, qd, root_y, stance_side"),
+        ({"q": POSTURE, "velocity": 0}, "valid: command, mode, q, qd, root_y, stance_side"),
     ],
 )
 def test_bad_reset_option_is_refused_by_name(options, name):
