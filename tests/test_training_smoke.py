@@ -651,3 +651,33 @@ def test_a_config_files_value_of_the_wrong_toml_type_is_refused(tmp_path, toml, 
         check_toml_kinds(PPOConfig, read_config_file(cfg), "c.toml")
     # a flag is text, converted as before
     assert parse_config(PPOConfig, ["--stop-evals", "2"], "t").stop_evals == 2
+
+
+@pytest.mark.parametrize("damage", ["narrower", "bfloat16"])
+def test_a_start_whose_first_layer_cannot_be_widened_is_refused_in_one_line(tmp_path, damage):
+    """Finding: --init-from with a narrower or bfloat16 first layer failed with a raw IndexError
+    or TypeError before the weights were checked."""
+    import shutil
+
+    import torch
+    from safetensors.torch import load_file, save_file
+
+    from training.ppo.policy_io import open_snapshot, published_snapshot, write_manifest
+    from training.ppo.widen import FIRST_LAYERS, widen_snapshot
+
+    src = Path(__file__).resolve().parents[1] / "policies" / "ppo_gait_50hz"
+    run = tmp_path / "start"
+    shutil.copytree(src, run, ignore=shutil.ignore_patterns("figures"))
+    which, _ = published_snapshot(run)
+    path = run / which / "policy.safetensors"
+    tensors = load_file(path)
+    k = FIRST_LAYERS[0]
+    tensors[k] = tensors[k][:, :-3] if damage == "narrower" else tensors[k].to(torch.bfloat16)
+    save_file({n: t.contiguous() for n, t in tensors.items()}, path)
+    write_manifest(path.parent)
+    snap = open_snapshot(run, which)
+    match = "reads 23 inputs where the start's observation has 26" if damage == "narrower" \
+        else "bfloat16, not float32"  # fmt: skip
+    with pytest.raises(ValueError, match=match) as e:
+        widen_snapshot(snap, [26, 27], np.zeros(2), np.ones(2), width=26)
+    assert "\n" not in str(e.value) and k in str(e.value)

@@ -1171,3 +1171,79 @@ def test_evaluate_refuses_a_wrong_path_or_out_before_loading_anything(tmp_path, 
                        str(tmp_path / "afile" / "sub")])  # fmt: skip
     out, err = capsys.readouterr()
     assert "not a directory" in err and "loading" not in out
+
+
+# ------------------------------------------------------------------ disks, and a snapshot replaced
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """A 256 kB tmpfs this test mounts (root only; skipped where mounting is not allowed)."""
+    where = tmp_path / "disk"
+    where.mkdir()
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root")
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(where)],
+                       capture_output=True, text=True)  # fmt: skip
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.strip()}")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], capture_output=True)
+
+
+@pytest.mark.parametrize("disk", ["full", "read-only"])
+def test_a_full_or_read_only_disk_is_a_one_line_refusal_that_leaves_nothing(small_tmpfs, disk,
+                                                                             capsys):  # fmt: skip
+    out = small_tmpfs / "eval"
+    if disk == "full":
+        (small_tmpfs / "filler").write_bytes(b"\0" * (256 * 1024 - 8192))  # nearly full
+    else:
+        subprocess.run(["mount", "-o", "remount,ro", str(small_tmpfs)], check=True)
+    before = sorted(p.name for p in small_tmpfs.iterdir())
+    with pytest.raises(SystemExit) as e:
+        evaluate.main([str(ROOT / "policies" / "ppo_gait_50hz"), "--episodes", "1", "--out",
+                       str(out)])  # fmt: skip
+    msg = str(e.value)
+    want = "the disk is full" if disk == "full" else "read-only file system"
+    out_text, err = capsys.readouterr()
+    assert want in msg and "\n" not in msg and "Traceback" not in err, msg
+    assert sorted(p.name for p in small_tmpfs.iterdir()) == before  # nothing left behind
+    if disk == "read-only":  # known before anything is loaded
+        assert "loading" not in out_text
+
+
+def test_a_snapshot_loads_whole_while_another_process_replaces_it(tmp_path):
+    """A run publishing its snapshot (atomic_dir: the new one renamed in, the old kept as
+    NAME.prev) while a reader loads it: every load gets one complete snapshot."""
+    import multiprocessing as mp
+
+    from training.ppo.policy_io import POLICY_FILE, open_snapshot
+
+    run = tmp_path / "run"
+    shutil.copytree(ROOT / "policies" / "ppo_gait_50hz", run,
+                    ignore=shutil.ignore_patterns("figures", "best", "published.json"))  # fmt: skip
+    files = {p.name: p.read_bytes() for p in (run / "final").iterdir() if p.name != "manifest.json"}
+    ctx = mp.get_context("fork")
+    stop, count = ctx.Event(), ctx.Value("i", 0)
+    writer = ctx.Process(target=_replace_snapshots, args=(run / "final", files, stop, count))
+    writer.start()
+    loads, t0 = 0, time.time()
+    try:
+        while count.value < 200 and time.time() - t0 < 60:
+            snap = open_snapshot(run, "final")
+            assert snap.files[POLICY_FILE] == files[POLICY_FILE]
+            loads += 1
+    finally:
+        stop.set()
+        writer.join()
+    assert count.value >= 200 and loads >= 200  # many loads during many replacements
+
+
+def _replace_snapshots(where, files, stop, count):
+    from training.ppo.policy_io import atomic_dir
+
+    while not stop.is_set():
+        with atomic_dir(where) as tmp:
+            for name, data in files.items():
+                (tmp / name).write_bytes(data)
+        count.value += 1

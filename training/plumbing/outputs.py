@@ -552,6 +552,12 @@ def check_command_output(path: Path, command: str, whole: tuple[str, ...] = ()) 
         if os.path.lexists(parent) and not os.path.isdir(parent):
             raise OutputError(f"{shown(Path(path))}: cannot create it ({shown(parent)} is not a "
                               f"directory)")  # fmt: skip
+        if os.path.isdir(parent) and os.statvfs(parent).f_flag & os.ST_RDONLY:
+            raise OutputError(f"{shown(Path(path))}: cannot create it ({shown(parent)} is on a "
+                              f"read-only file system)")  # fmt: skip
+        if os.path.isdir(parent) and not os.access(parent, os.W_OK):
+            raise OutputError(f"{shown(Path(path))}: cannot create it ({shown(parent)}: "
+                              f"permission denied)")  # fmt: skip
         return
     with OutDir.open(path, create=False) as out:
         _check_output(out, command, whole)

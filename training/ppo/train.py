@@ -204,7 +204,7 @@ def _start_from(cfg: PPOConfig, run: OutDir, vecnorm, fs: Path):
             else (np.zeros(len(added)), np.ones(len(added)))
         )  # fresh: not read
         try:
-            snap = widen_snapshot(snap, added, *statistics)
+            snap = widen_snapshot(snap, added, *statistics, width=cfg.obs_dim() - len(added))
         except ValueError as e:
             raise Refusal(f"train_ppo: error: --init-from: {e}") from None
         print(f"the start's network widened with zero columns for observation entries "

@@ -54,14 +54,16 @@ def _insert(a: np.ndarray, added: list[int], values, axis: int) -> np.ndarray:
     return np.insert(a, [k - i for i, k in enumerate(added)], values, axis=axis)
 
 
-def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.ndarray) -> Snapshot:
+def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.ndarray,
+                   width: int | None = None) -> Snapshot:  # fmt: skip
     """An in-memory copy of ``snap`` whose network and normaliser read the ``added`` entries.
 
     The policy's first layers gain zero columns at ``added`` (a standing branch's and a braking
     actor's too, the branch's input map 1 and 0 there), the observation statistics ``mean`` and
     ``var`` there; every other file is the snapshot's own. ValueError where the snapshot's
     network has no such first layers (an in-network normaliser) or only part of a standing
-    branch.
+    branch, or where a layer to widen is not float32 or does not read ``width`` inputs (the
+    start's observation size), before anything is reshaped.
     """
     import torch
     from safetensors.torch import save
@@ -81,7 +83,18 @@ def widen_snapshot(snap: Snapshot, added: list[int], mean: np.ndarray, var: np.n
         raise ValueError(f"{snap.path}: a standing branch without all of "
                          f"{BRANCH_FIRST_LAYERS + BRANCH_INPUT} to widen")  # fmt: skip
     brake = (BRAKE_FIRST_LAYER,) if BRAKE_FIRST_LAYER in tensors else ()
-    for k in FIRST_LAYERS + (BRANCH_FIRST_LAYERS if branch else ()) + brake:
+    layers = FIRST_LAYERS + (BRANCH_FIRST_LAYERS if branch else ()) + brake
+    vectors = BRANCH_INPUT if branch else ()
+    for k in layers + vectors:
+        t = tensors[k]
+        if t.dtype != torch.float32:
+            raise ValueError(f"{snap.path}: {k} is {str(t.dtype).removeprefix('torch.')}, "
+                             f"not float32")  # fmt: skip
+        got = t.shape[1] if k in layers else t.shape[0]
+        if t.dim() != (2 if k in layers else 1) or (width is not None and got != width):
+            raise ValueError(f"{snap.path}: {k} reads {got} inputs where the start's "
+                             f"observation has {width}")  # fmt: skip
+    for k in layers:
         tensors[k] = torch.from_numpy(_insert(tensors[k].numpy(), added, 0.0, axis=1))
     for k, value in zip(BRANCH_INPUT, (1.0, 0.0), strict=True) if branch else ():
         tensors[k] = torch.from_numpy(_insert(tensors[k].numpy(), added, value, axis=0))
