@@ -131,11 +131,15 @@ def figures(actor, cfg, seed_best: int, seed_worst: int, eps_by_seed: dict, out_
 
 
 STRIP_S = 2.0
-"""The start-from-rest strips show the first this many seconds [s]."""
+"""The start-from-rest strips show at least the first this many seconds [s] ..."""
+STRIP_MAX_S = 4.0
+"""... and on to just after the first step, at most this many [s]."""
 
 
-def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
-    """Figure: the first ``STRIP_S`` from rest (stick figures, centre of mass and pressure)."""
+def rest_strip(actor, cfg, path: Path, who: str, seed: int) -> None:
+    """Figure: the start from rest of episode ``seed`` (stick figures, centre of mass and
+    pressure) over ``STRIP_S``, or until just after its first step where that is later (at most
+    :data:`STRIP_MAX_S`)."""
     from training.evaluation.rollouts import com_and_cop
     from training.plumbing import plots
 
@@ -143,7 +147,7 @@ def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
 
     def record(env, _k):
         u = env.unwrapped
-        if u.state.t <= STRIP_S:
+        if u.state.t <= STRIP_MAX_S:
             com, cop = com_and_cop(env)
             st = u.state
             frames.append(
@@ -153,10 +157,12 @@ def rest_strip(actor, cfg, path: Path, who: str, seed: int = 0) -> None:
     kw = {**cfg.env_kwargs(), "start": "rest"}
     (ep,) = run_episodes(actor, kw, [seed], cfg.env_id, record=record, episode_s=EPISODE_S)
     first = f"first step at {ep['step_t_s'][0]:.2f} s" if ep["step_t_s"] else "no step"
+    cut = STRIP_S if not ep["step_t_s"] else min(max(STRIP_S, ep["step_t_s"][0] + 0.1),
+                                                 STRIP_MAX_S)  # fmt: skip
     plots.initiation_strip(
-        frames,
+        [f for f in frames if f["t"] <= cut + 1e-9],
         path,
-        f"{who} from rest, the paper's Fig. 2 posture (seed {seed}): first {STRIP_S:.0f} s; "
+        f"{who} from rest, the paper's Fig. 2 posture (episode seed {seed}): first {cut:.2f} s; "
         f"{first}, {ep['steps_completed']} steps in the episode",
     )
 
@@ -229,7 +235,7 @@ def _rows_compare(run_dir: Path, actor, batch, cfg, seeds, out_dir: Path) -> lis
     rest, spec = _rest_rows(batch, cfg, seeds)
     rows += rest
     rest_strip(controller_from(spec), cfg, out_dir / "figures" / "rest_start_teacher.png",
-               "the teacher")  # fmt: skip
+               "the teacher", seeds[0])  # fmt: skip
     print("Table 2 open loop from rest (paper preset; default physics at 2 ms; walking task)")
     return rows + open_loop_baselines()
 
@@ -421,7 +427,8 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     print("writing the GIF and the strips", flush=True)
     figures(actor, cfg, seeds[order[-1]], seeds[order[0]], by_seed, out_dir)
     if args.compare or start == "rest":
-        rest_strip(actor, cfg, out_dir / "figures" / "rest_start_network.png", "the network")
+        rest_strip(actor, cfg, out_dir / "figures" / "rest_start_network.png", "the network",
+                   seeds[0])  # the first report episode, as its table
     summary = {
         "which": args.which,
         "why": getattr(args, "why", ""),
