@@ -26,8 +26,8 @@ from stable_baselines3.common.callbacks import (
 from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-from training.evaluation.rollouts import run_episodes_batched
-from training.evaluation.stats import format_success, success
+from training.plumbing.rollouts import run_episodes_batched
+from training.plumbing.stats import format_success, success
 from training.ppo.sb3_vec import make_sb3_vec_env
 
 DT = 0.02  # the control period [s]: the paper's sample time

@@ -155,3 +155,29 @@ def test_every_reward_kind_has_its_part():
     from biped_constraint_env.rewards import REWARD_KINDS, REWARD_PARTS
 
     assert set(REWARD_PARTS) == set(REWARD_KINDS)
+
+
+def test_trainings_folders_have_no_import_circle():
+    """The rooms of training/ (its folders) depend one way: no folder imports a folder that
+    imports it back (evaluation reads ppo's policies; ppo runs episodes from plumbing)."""
+    graph = _training_graph()
+    rooms: dict[str, set[str]] = {}
+    for m, deps in graph.items():
+        room = m.split(".")[1]
+        rooms.setdefault(room, set()).update(d.split(".")[1] for d in deps)
+    for room in rooms:
+        rooms[room].discard(room)
+    state: dict[str, int] = {}
+
+    def visit(r, path):
+        if state.get(r) == 1:
+            raise AssertionError(f"folder circle: {' -> '.join([*path, r])}")
+        if state.get(r) == 2:
+            return
+        state[r] = 1
+        for d in sorted(rooms.get(r, ())):
+            visit(d, [*path, r])
+        state[r] = 2
+
+    for r in sorted(rooms):
+        visit(r, [])

@@ -26,7 +26,7 @@ class _Payload:
 def test_committed_walker_is_a_network_alone_and_deterministic():
     import torch
 
-    from training.evaluation.rollouts import run_episodes
+    from training.plumbing.rollouts import run_episodes
     from training.ppo.imitation import FixedNormalizer
     from training.ppo.policy_io import load_policy, policy_actor
 
@@ -93,7 +93,7 @@ def test_committed_level2_policy_walks_with_no_recorded_motion():
     import torch
 
     from biped_constraint_env.settings import make_settings
-    from training.evaluation.rollouts import run_episodes
+    from training.plumbing.rollouts import run_episodes
     from training.ppo.policy_io import available, load_policy, policy_actor
 
     torch.set_num_threads(1)
@@ -122,7 +122,7 @@ def test_committed_gait_rest_policy_starts_from_rest_with_no_recorded_motion():
 
     from biped_constraint_env.settings import make_settings
     from biped_constraint_env.starts import NUDGE_RATE_RANGE_RAD_S
-    from training.evaluation.rollouts import run_episodes
+    from training.plumbing.rollouts import run_episodes
     from training.ppo.policy_io import available, load_policy, policy_actor, published_snapshot
 
     torch.set_num_threads(1)

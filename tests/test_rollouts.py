@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from training.controller.model_controller import ModelController
-from training.evaluation.rollouts import run_episodes, run_episodes_batched
+from training.plumbing.rollouts import run_episodes, run_episodes_batched
 
 KEYS = ("seed", "steps_completed", "end")
 

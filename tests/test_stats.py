@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from training.evaluation.stats import format_success, success, wilson_interval
+from training.plumbing.stats import format_success, success, wilson_interval
 
 
 @pytest.mark.parametrize(
@@ -47,7 +47,7 @@ def test_wilson_is_exact_at_the_ends():
 
 
 def test_iqm_is_the_mean_of_the_middle_half_with_a_bootstrap_interval_around_it():
-    from training.evaluation.stats import iqm, iqm_interval
+    from training.plumbing.stats import iqm, iqm_interval
 
     assert iqm([1.0, 2.0, 3.0, 4.0]) == 2.5  # the middle two
     assert iqm([0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]) == 1.0  # two failures cut

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from training.evaluation import command_protocol as cp
-from training.evaluation.stats import success
+from training.plumbing.stats import success
 from training.ppo.policy_io import load_policy, policy_batch_actor
 
 torch.set_num_threads(1)

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 import biped_constraint_env  # noqa: F401
-from training.evaluation.stats import MIN_STEPS
+from training.plumbing.stats import MIN_STEPS
 from training.plumbing.outputs import write_file
 from training.ppo.policy_io import load_policy, policy_batch_actor
 

@@ -34,9 +34,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from biped_constraint_env.settings import with_keys
-from training.evaluation.rollouts import ENERGY_KEYS
-from training.evaluation.rollouts import energy as rollout_energy
-from training.evaluation.stats import MIN_STEPS, success
+from training.plumbing.rollouts import ENERGY_KEYS
+from training.plumbing.rollouts import energy as rollout_energy
+from training.plumbing.stats import MIN_STEPS, success
 
 START_COMMAND_M_S = 1.0
 TRACK_COMMANDS_M_S = (0.3, 0.6, 1.0, 1.5, 2.0)
@@ -379,7 +379,7 @@ def push_figure(rows: list[dict], path) -> None:
 
 
 def _rate(k: int, n: int) -> dict:
-    from training.evaluation.stats import wilson_interval
+    from training.plumbing.stats import wilson_interval
 
     lo, hi = wilson_interval(k, n)
     return {"successes": k, "episodes": n, "rate": k / n, "ci95": (lo, hi), "min_steps": MIN_STEPS}
@@ -401,7 +401,7 @@ def run_protocol(act, env_kwargs: dict, seeds: Sequence[int], env_id: str) -> li
 
 def markdown(rows: list[dict]) -> str:
     """The rows as a markdown table."""
-    from training.evaluation.stats import format_success
+    from training.plumbing.stats import format_success
 
     out = ["| row | result | ends |", "|---|---|---|"]
     for r in rows:

@@ -37,7 +37,7 @@ import numpy as np
 
 from biped_constraint_env.settings import with_keys
 from biped_constraint_env.tasks import EPISODE_S, MAX_DT_S, MIN_DT_S
-from training.evaluation.rollouts import (
+from training.plumbing.rollouts import (
     COMPARE_PUSH,
     TABLE_HEADER,
     batched_row,
@@ -45,7 +45,7 @@ from training.evaluation.rollouts import (
     summarize,
     table_row,
 )
-from training.evaluation.stats import MIN_STEPS, format_success
+from training.plumbing.stats import MIN_STEPS, format_success
 from training.plumbing.common import CliParser, command, float_in, int_in
 from training.plumbing.outputs import check_command_output, command_output, write_file
 from training.plumbing.safe_files import UntrustedFileError
@@ -140,7 +140,7 @@ def rest_strip(actor, cfg, path: Path, who: str, seed: int) -> None:
     """Figure: the start from rest of episode ``seed`` (stick figures, centre of mass and
     pressure) over ``STRIP_S``, or until just after its first step where that is later (at most
     :data:`STRIP_MAX_S`)."""
-    from training.evaluation.rollouts import com_and_cop
+    from training.plumbing.rollouts import com_and_cop
     from training.plumbing import plots
 
     frames = []

@@ -50,7 +50,7 @@ def conditions(reset_noise: float) -> list[tuple[str, str, dict]]:
 
 def run(make_actor, env_kwargs: dict, seeds, env_id: str, label: str) -> list[dict]:
     """Every condition's row (``make_actor()``: a fresh batch actor per condition)."""
-    from training.evaluation.rollouts import batched_row
+    from training.plumbing.rollouts import batched_row
 
     rows = []
     from biped_constraint_env.settings import make_settings, with_keys
@@ -128,7 +128,7 @@ def figure(rows: list[dict], path: Path, title: str) -> None:
 
 def markdown(rows: list[dict]) -> str:
     """The rows as a markdown table: condition, success (95% CI), mean |hip dv|, ends."""
-    from training.evaluation.stats import format_success
+    from training.plumbing.stats import format_success
 
     out = [
         "| condition | success, 95% CI | hip velocity change [m/s] | ends |",

@@ -21,7 +21,7 @@ import re
 import sys
 from pathlib import Path
 
-from training.evaluation.stats import format_success, iqm_interval
+from training.plumbing.stats import format_success, iqm_interval
 from training.plumbing.common import CliParser, command
 from training.plumbing.outputs import command_output, write_file
 from training.plumbing.safe_files import parse_json_object, read_bytes

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.starts import start_name
-from training.evaluation.rollouts import run_episodes_batched
+from training.plumbing.rollouts import run_episodes_batched
 from training.plumbing.outputs import OutDir
 from training.plumbing.safe_files import read_csv
 from training.ppo.config import (
@@ -393,7 +393,7 @@ def make_callbacks(
 
         The evaluation runs the deterministic policy on ``cfg.eval_episodes`` selection
         seeds at once in the batched env
-        (:func:`training.evaluation.rollouts.run_episodes_batched`).
+        (:func:`training.plumbing.rollouts.run_episodes_batched`).
 
         ``best``: the best score so far (carried over by a resume), so that ``best/`` is
         replaced only by a better evaluation.

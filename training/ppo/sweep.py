@@ -70,7 +70,7 @@ def evaluate_run(run: Path, episodes: int) -> dict[str, float]:
 
     They start at 10000: the final evaluation's seeds (0, 1, ...) stay unseen by the ranking.
     """
-    from training.evaluation.rollouts import run_episodes
+    from training.plumbing.rollouts import run_episodes
     from training.ppo.config import SELECTION_SEED_OFFSET
     from training.ppo.policy_io import load_policy, policy_actor
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from training.evaluation.rollouts import run_episodes
+from training.plumbing.rollouts import run_episodes
 from training.plumbing.common import (
     progress,
 )

@@ -17,7 +17,7 @@ import numpy as np
 
 from biped_constraint_env.observation import OBS_FORCES
 from biped_constraint_env.settings import with_keys
-from training.evaluation.stats import format_success, success
+from training.plumbing.stats import format_success, success
 
 ENERGY_KEYS = ("motor_work_pos_j", "motor_work_abs_j", "damping_loss_j")
 """The env's ``info`` sums of the episode's energy (at every physics step)."""
@@ -371,7 +371,7 @@ def batched_row(
     import time
 
     from biped_constraint_env.tasks import EPISODE_S
-    from training.evaluation.stats import MIN_STEPS
+    from training.plumbing.stats import MIN_STEPS
 
     t0 = time.time()
     eps = run_episodes_batched(act, env_kw, seeds, env_id, episode_s=EPISODE_S,
