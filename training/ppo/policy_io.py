@@ -754,10 +754,12 @@ def import_sb3_zip(
 
 @command("policy_io")
 def main(argv: list[str] | None = None) -> int:
-    """``python -m training.ppo.policy_io import-sb3 MODEL.zip [--vecnormalize PKL] --out DIR``."""
+    """``python -m training.ppo.policy_io import-sb3 MODEL.zip --vecnormalize PKL --out DIR`` or
+    ``... export-onnx POLICY OUT.onnx`` (:mod:`training.ppo.onnx_export`)."""
     from training.plumbing.outputs import command_output
 
-    ap = CliParser(description="Convert an SB3 model.zip to a pickle-free snapshot")
+    ap = CliParser(description="Convert an SB3 model.zip to a pickle-free snapshot, or a "
+                               "policy to ONNX")  # fmt: skip
     sub = ap.add_subparsers(dest="cmd", required=True)
     imp = sub.add_parser("import-sb3", help="model.zip + vecnormalize.pkl -> a run directory")
     imp.add_argument("model_zip", type=Path)
@@ -770,7 +772,15 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUE",
         help="the env it was trained in (gym.make's kwargs as TOML values)",
     )
+    onx = sub.add_parser("export-onnx", help="a policy -> one ONNX graph (observation in, "
+                         "action out; the onnx extra)")  # fmt: skip
+    onx.add_argument("policy", type=Path, help="a policy or run directory")
+    onx.add_argument("out", type=Path, help="the .onnx file to write (a new path)")
+    onx.add_argument("--which", choices=sorted(SNAPSHOTS), default=None,
+                     help="the snapshot (default: the one the policy publishes)")  # fmt: skip
     a = ap.parse_args(argv)
+    if a.cmd == "export-onnx":
+        return _export_onnx_command(ap, a)
     from training.plumbing.common import parse_assignment
 
     try:
@@ -787,6 +797,36 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(str(e))
     print(f"wrote {a.out}")
     return 0
+
+
+def _export_onnx_command(ap, a) -> int:
+    """``export-onnx POLICY OUT.onnx``: refused before any loading where OUT is taken."""
+    if a.out.suffix != ".onnx":
+        ap.error(f"{a.out}: give a path ending in .onnx")
+    if os.path.lexists(a.out):
+        ap.error(f"{a.out}: exists; give a new path (nothing is overwritten)")
+    if not a.policy.is_dir():
+        ap.error(f"{a.policy}: no such directory")
+    try:
+        from training.ppo.onnx_export import export_onnx
+    except ImportError as e:
+        ap.error(f"export-onnx needs the onnx extra: pip install -e '.[onnx]' ({e.name} missing)")
+    try:
+        data, summary = export_onnx(a.policy, a.which)
+    except (FileNotFoundError, UntrustedFileError, ValueError) as e:
+        ap.error(str(e))
+    from training.plumbing.outputs import OutDir
+
+    with OutDir.open(a.out.parent) as d:
+        d.create_new(a.out.name)  # refused if anything appeared there meanwhile
+        d.write(a.out.name, data)
+    print(f"wrote {a.out} ({len(data)} bytes): {summary['snapshot']}/ of {a.policy}; input "
+          f"{INPUT_DOC}; outputs action, env_action; onnxruntime within "
+          f"{summary['max_error']:.2g} of the network")  # fmt: skip
+    return 0
+
+
+INPUT_DOC = "obs (batch, observation) float64"
 
 
 if __name__ == "__main__":
