@@ -134,13 +134,23 @@ def main(argv=None) -> int:
     ap = CliParser(description=__doc__.splitlines()[0])
     ap.add_argument("--other", type=Path, required=True, help="another checkout of the project")
     ap.add_argument("--rounds", type=int_in(1, 100), default=3, help="alternating rounds")
-    ap.add_argument("--ppo", default=None, metavar="CONFIG",
-                    help="time PPO with this train_ppo config instead of the env")
-    ap.add_argument("--ppo-steps", type=int_in(4096, 10**8), default=131072,
-                    help="env steps per PPO timing")
-    ap.add_argument("--ppo-threads", type=int_in(1, 64), nargs=2, default=(1, 2),
-                    metavar=("ENV", "UPDATES"),
-                    help="numba threads of the env, torch threads of the updates")
+    ap.add_argument(
+        "--ppo",
+        default=None,
+        metavar="CONFIG",
+        help="time PPO with this train_ppo config instead of the env",
+    )
+    ap.add_argument(
+        "--ppo-steps", type=int_in(4096, 10**8), default=131072, help="env steps per PPO timing"
+    )
+    ap.add_argument(
+        "--ppo-threads",
+        type=int_in(1, 64),
+        nargs=2,
+        default=(1, 2),
+        metavar=("ENV", "UPDATES"),
+        help="numba threads of the env, torch threads of the updates",
+    )
     ap.add_argument("--other-ppo-threads", type=int_in(1, 64), nargs=2, default=None,
                     metavar=("ENV", "UPDATES"),
                     help="the other checkout's (default: --ppo-threads), e.g. to time each "
@@ -164,8 +174,10 @@ def main(argv=None) -> int:
             print(f"round {k + 1} {name}: {json.dumps(rows[name][-1])} ({time.time() - t0:.0f} s)",
                   flush=True)  # fmt: skip
     if ppo is not None:
-        print(f"PPO on {a.ppo}, {a.ppo_steps} env steps timed after one rollout; threads "
-              f"(env, updates): this {tuple(a.ppo_threads)}, other {tuple(other_threads)}")
+        print(
+            f"PPO on {a.ppo}, {a.ppo_steps} env steps timed after one rollout; threads "
+            f"(env, updates): this {tuple(a.ppo_threads)}, other {tuple(other_threads)}"
+        )
         _ppo_table(rows, here, a.other)
         return 0
     best = {

@@ -32,10 +32,8 @@ are short, so these rows include many resets, as a real run's first minutes do.
 from __future__ import annotations
 
 import argparse
-import tempfile
 import time
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
@@ -69,8 +67,9 @@ def ppo_breakdown(cfg, steps: int, env_threads: int, update_threads: int, barrie
     one rollout as a warm-up, then ``steps`` env steps timed; returns ``{"rate": env-steps/s,
     "shares": {part: share of the wall time}, "sha256": the digest of the weights and the
     normaliser's statistics at the end}`` (:data:`PARTS`; the same config, seed, threads and
-    steps in two checkouts give the same digest where they compute the same numbers). Self-contained: it uses only
-    what every checkout of the project has, so ``benchmarks.bench_ab`` runs it on another.
+    steps in two checkouts give the same digest where they compute the same numbers).
+    Self-contained: it uses only what every checkout of the project has, so
+    ``benchmarks.bench_ab`` runs it on another.
     ``barrier``: a multiprocessing barrier that the timed learning waits on after the warm-up
     (two processes side by side start timing together).
     """

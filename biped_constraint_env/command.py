@@ -142,8 +142,9 @@ def split_reset_options(
 
 
 def check_commands(value: Any, n: int | None = None, what: str = "command"):
-    """Commanded speeds given by a user: one real number (a float), or with ``n`` (a batch's
-    rows) one per row (an (n,) array), each :func:`check_command`'s.
+    """Commanded speeds given by a user, each checked by :func:`check_command`.
+
+    One real number (a float), or with ``n`` (a batch's rows) one per row (an (n,) array).
 
     ``set_command`` and ``reset(options={"command": ...})`` both take them so: a string, a
     boolean, a list for one env or a value beyond :data:`MAX_COMMAND_M_S` is refused.

@@ -140,8 +140,11 @@ class EnvCore:
     """What :meth:`_bind_parts` builds: functions bound to this core's parts."""
 
     def _bind_parts(self) -> None:
-        """The parts this env has, chosen once: what runs before a period, after it, in the
-        observation and in ``info`` (the methods below only run the lists)."""
+        """The parts this env has, chosen once.
+
+        What runs before a period, after it, in the observation and in ``info`` (the methods
+        below only run the lists).
+        """
         s = self.settings
         self.terminations = terminations(self)
         self._before = self._before_hooks()

@@ -85,7 +85,6 @@ def test_a_truncated_snapshot_is_not_taken_for_a_policy(tmp_path):
     load_policy(run, "final")
 
 
-
 def test_committed_level2_policy_walks_with_no_recorded_motion():
     """policies/ppo_gait_50hz: the network alone sets torques every 20 ms, trained by PPO from a
     random network with the gait reward and the env's own starts; no option of its run-time or
@@ -139,6 +138,3 @@ def test_committed_gait_rest_policy_starts_from_rest_with_no_recorded_motion():
     (ep,) = run_episodes(policy_actor(policy, norm, cfg), cfg.env_kwargs(), [0], cfg.env_id,
                          episode_s=30)  # fmt: skip
     assert ep["steps_completed"] >= 20 and ep["end"] == "time_limit", ep
-
-
-

@@ -8,8 +8,8 @@ cases rewrite the manifest after tampering: the checks behind it must hold on th
 
 from __future__ import annotations
 
-import io
 import hashlib
+import io
 import json
 import os
 import shutil
@@ -38,7 +38,9 @@ SCRATCH = ROOT / "policies" / "ppo_gait_50hz"  # a committed policy
 def policy(tmp_path, monkeypatch):
     """A copy of a committed policy (its final/ snapshot, no figures), the cwd a scratch folder."""
     run = tmp_path / "policies" / "evil"
-    shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best", "published.json"))
+    shutil.copytree(
+        SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best", "published.json")
+    )
     monkeypatch.chdir(tmp_path)
     return run
 

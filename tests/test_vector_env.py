@@ -210,6 +210,7 @@ def test_the_sb3_adapter_gives_the_single_envs_numbers_and_infos():
                 ended += 1
                 truncated += b["TimeLimit.truncated"]
                 assert a["TimeLimit.truncated"] == b["TimeLimit.truncated"]
-                np.testing.assert_array_equal(a["terminal_observation"],
-                                              b["terminal_observation"].astype(np.float32))
+                np.testing.assert_array_equal(
+                    a["terminal_observation"], b["terminal_observation"].astype(np.float32)
+                )
     assert ended > truncated > 0

@@ -619,7 +619,9 @@ def test_a_load_during_a_replacement_never_mixes_two_snapshots(tmp_path):
     from training.ppo.policy_io import build_policy, read_config, save_snapshot
 
     run = tmp_path / "run"
-    shutil.copytree(SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best", "published.json"))
+    shutil.copytree(
+        SCRATCH, run, ignore=shutil.ignore_patterns("figures", "best", "published.json")
+    )
     cfg = read_config(run)
     policy = build_policy(cfg)
 
@@ -788,8 +790,12 @@ def test_a_crafted_published_file_is_refused(tmp_path):
 
     run = tmp_path / "run"
     run.mkdir()
-    for crafted in ('{"snapshot": "../../etc", "why": ""}', '{"snapshot": ["best"]}',
-                    '{"snapshot": {"best": 1}}', '{"snapshot": "best", "why": ["x"]}'):
+    for crafted in (
+        '{"snapshot": "../../etc", "why": ""}',
+        '{"snapshot": ["best"]}',
+        '{"snapshot": {"best": 1}}',
+        '{"snapshot": "best", "why": ["x"]}',
+    ):
         (run / "published.json").write_text(crafted)  # a list: a traceback before (finding)
         with pytest.raises(UntrustedFileError, match="snapshot must be one of"):
             published_snapshot(run)
@@ -1129,12 +1135,14 @@ def test_a_whole_directory_command_holds_only_the_names_it_writes(tmp_path):
     crafted.mkdir()
     (crafted / "notes.txt").write_text("mine")
     (crafted / MARKER).write_text(json.dumps({"files": {"*": "sweep"}}))
-    with pytest.raises(UntrustedFileError, match="notes.txt"), command_output(
-        crafted, "sweep", whole=("tune", "results.csv")
+    with (
+        pytest.raises(UntrustedFileError, match="notes.txt"),
+        command_output(crafted, "sweep", whole=("tune", "results.csv")),
     ):
         pass
-    with pytest.raises(UntrustedFileError, match="the output of sweep"), command_output(
-        out, "evaluate"
+    with (
+        pytest.raises(UntrustedFileError, match="the output of sweep"),
+        command_output(out, "evaluate"),
     ):
         pass
 

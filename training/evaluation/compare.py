@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.tasks import EPISODE_S
-from training.plumbing.rollouts import run_episodes, summarize
 from training.plumbing.common import CliParser, command, int_in, refusals
 from training.plumbing.outputs import write_file
+from training.plumbing.rollouts import run_episodes, summarize
 from training.ppo.policy_io import (
     SNAPSHOTS,
     available,

@@ -37,6 +37,8 @@ import numpy as np
 
 from biped_constraint_env.settings import with_keys
 from biped_constraint_env.tasks import EPISODE_S, MAX_DT_S, MIN_DT_S
+from training.plumbing.common import CliParser, command, float_in, int_in
+from training.plumbing.outputs import check_command_output, command_output, write_file
 from training.plumbing.rollouts import (
     COMPARE_PUSH,
     TABLE_HEADER,
@@ -45,10 +47,8 @@ from training.plumbing.rollouts import (
     summarize,
     table_row,
 )
-from training.plumbing.stats import MIN_STEPS, format_success
-from training.plumbing.common import CliParser, command, float_in, int_in
-from training.plumbing.outputs import check_command_output, command_output, write_file
 from training.plumbing.safe_files import UntrustedFileError
+from training.plumbing.stats import MIN_STEPS, format_success
 from training.ppo.config import REPORT_EPISODES, REPORT_SEED_OFFSET
 from training.ppo.policy_io import (
     SNAPSHOTS,
@@ -137,11 +137,13 @@ STRIP_MAX_S = 4.0
 
 
 def rest_strip(actor, cfg, path: Path, who: str, seed: int) -> None:
-    """Figure: the start from rest of episode ``seed`` (stick figures, centre of mass and
-    pressure) over ``STRIP_S``, or until just after its first step where that is later (at most
-    :data:`STRIP_MAX_S`)."""
-    from training.plumbing.rollouts import com_and_cop
+    """Figure: the start from rest of episode ``seed``.
+
+    Stick figures, centre of mass and pressure over ``STRIP_S``, or until just after its first
+    step where that is later (at most :data:`STRIP_MAX_S`).
+    """
     from training.plumbing import plots
+    from training.plumbing.rollouts import com_and_cop
 
     frames = []
 
@@ -427,8 +429,9 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     print("writing the GIF and the strips", flush=True)
     figures(actor, cfg, seeds[order[-1]], seeds[order[0]], by_seed, out_dir)
     if args.compare or start == "rest":
-        rest_strip(actor, cfg, out_dir / "figures" / "rest_start_network.png", "the network",
-                   seeds[0])  # the first report episode, as its table
+        rest_strip(
+            actor, cfg, out_dir / "figures" / "rest_start_network.png", "the network", seeds[0]
+        )  # the first report episode, as its table
     summary = {
         "which": args.which,
         "why": getattr(args, "why", ""),

@@ -21,10 +21,10 @@ import re
 import sys
 from pathlib import Path
 
-from training.plumbing.stats import format_success, iqm_interval
 from training.plumbing.common import CliParser, command
 from training.plumbing.outputs import command_output, write_file
 from training.plumbing.safe_files import parse_json_object, read_bytes
+from training.plumbing.stats import format_success, iqm_interval
 from training.ppo.policy_io import json_text
 
 MAX_FILE_BYTES = 64 * 2**20

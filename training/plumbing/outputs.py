@@ -527,7 +527,8 @@ def _check_output(out: OutDir, command: str, whole: tuple[str, ...]):
         foreign = [
             rel
             for rel in _listing(out, skip=stagings)
-            if rel != MARKER and not rel.endswith("/")  # an empty folder: nothing to protect
+            if rel != MARKER
+            and not rel.endswith("/")  # an empty folder: nothing to protect
             and (rel not in owned or digests.get(rel) != _sha256(out, rel))
         ]
     if foreign:

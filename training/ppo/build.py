@@ -6,7 +6,6 @@ from pathlib import Path
 
 from training.ppo.config import PPOConfig
 
-
 OPTIMIZER_KWARGS = {"eps": 1e-5, "foreach": True}
 """The Adam of every run: SB3's own (its ``eps``, 1e-5, which SB3 sets only where no
 ``optimizer_kwargs`` are given) stepping all parameters at once (torch's multi-tensor

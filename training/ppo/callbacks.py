@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.starts import start_name
-from training.plumbing.rollouts import run_episodes_batched
 from training.plumbing.outputs import OutDir
+from training.plumbing.rollouts import run_episodes_batched
 from training.plumbing.safe_files import read_csv
 from training.ppo.config import (
     MAX_RESTARTS,

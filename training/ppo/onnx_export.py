@@ -18,7 +18,6 @@ import contextlib
 import io
 import logging
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -56,8 +55,11 @@ def _module(policy, norm, gear):
     return Exported().eval()
 
 
-def export_onnx(run: Path, which: str | None = None) -> tuple[bytes, dict]:
-    """(the ONNX model's bytes, a summary) of a run's snapshot (the published one by default).
+def export_onnx(policy, norm, cfg, actor, where: str = "the policy") -> tuple[bytes, float]:
+    """(the ONNX model's bytes, onnxruntime's largest difference) of a loaded policy.
+
+    ``policy``, ``norm`` and ``cfg``: :func:`training.ppo.policy_io.load_policy`'s; ``actor``:
+    its batch actor, observations -> the env's actions, to check against.
 
     ValueError where the policy cannot be exported (a residual on the model controller) or
     where onnxruntime's actions differ from the network's by more than :data:`TOLERANCE`.
@@ -65,13 +67,10 @@ def export_onnx(run: Path, which: str | None = None) -> tuple[bytes, dict]:
     import onnxruntime as ort
     import torch
 
-    from training.ppo.policy_io import load_policy, policy_batch_actor, published_snapshot
-
-    which = which or published_snapshot(run)[0]
-    policy, norm, cfg, state = load_policy(run, which)
     if cfg.base_controller:
-        raise ValueError(f"{run}: its network is a residual on the model controller "
-                         f"{cfg.base_controller!r}, which is not a network: no ONNX graph of it")  # fmt: skip
+        raise ValueError(f"{where}: its network is a residual on the model controller "
+                         f"{cfg.base_controller!r}, which is not a network: no ONNX graph "
+                         f"of it")  # fmt: skip
     amap = cfg.action_map()
     module = _module(policy, norm, amap.gear)
     d = policy.observation_space.shape[0]
@@ -100,15 +99,8 @@ def export_onnx(run: Path, which: str | None = None) -> tuple[bytes, dict]:
     session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
     got, env_action = session.run(list(OUTPUTS), {INPUT: obs})
     err = float(np.abs(got - want).max())
-    env_err = float(np.abs(env_action - policy_batch_actor(policy, norm, cfg)(obs)).max())
+    env_err = float(np.abs(env_action - actor(obs)).max())
     if not err <= TOLERANCE or not env_err <= TOLERANCE * float(np.max(amap.gear)):
-        raise ValueError(f"{run}: onnxruntime's actions differ from the network's by {err:.3g} "
-                         f"(tolerance {TOLERANCE})")  # fmt: skip
-    summary = {"policy": str(run), "snapshot": which, "observation": d, "opset": OPSET,
-               "inputs": {INPUT: f"(batch, {d}) float64: the env's raw observation"},
-               "outputs": {"action": "(batch, 5) float32: the network's action in [-1, 1]",
-                           "env_action": "(batch, 5) float64: the env's action "
-                                         + ("(PD targets in [-1, 1])" if amap.limit == 1.0
-                                            else "(joint torques [N m])")},
-               "max_error": err, "num_timesteps": state.get("num_timesteps")}  # fmt: skip
-    return data, summary
+        raise ValueError(f"{where}: onnxruntime's actions differ from the network's by "
+                         f"{max(err, env_err):.3g} (tolerance {TOLERANCE})")  # fmt: skip
+    return data, err

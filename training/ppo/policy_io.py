@@ -754,8 +754,12 @@ def import_sb3_zip(
 
 @command("policy_io")
 def main(argv: list[str] | None = None) -> int:
-    """``python -m training.ppo.policy_io import-sb3 MODEL.zip --vecnormalize PKL --out DIR`` or
-    ``... export-onnx POLICY OUT.onnx`` (:mod:`training.ppo.onnx_export`)."""
+    """Convert a policy: ``import-sb3`` or ``export-onnx``.
+
+    ``python -m training.ppo.policy_io import-sb3 MODEL.zip --vecnormalize PKL --out DIR``;
+    ``python -m training.ppo.policy_io export-onnx POLICY OUT.onnx``
+    (:mod:`training.ppo.onnx_export`).
+    """
     from training.plumbing.outputs import command_output
 
     ap = CliParser(description="Convert an SB3 model.zip to a pickle-free snapshot, or a "
@@ -812,7 +816,10 @@ def _export_onnx_command(ap, a) -> int:
     except ImportError as e:
         ap.error(f"export-onnx needs the onnx extra: pip install -e '.[onnx]' ({e.name} missing)")
     try:
-        data, summary = export_onnx(a.policy, a.which)
+        which = a.which or published_snapshot(a.policy)[0]
+        policy, norm, cfg, _ = load_policy(a.policy, which)
+        data, err = export_onnx(policy, norm, cfg, policy_batch_actor(policy, norm, cfg),
+                                str(a.policy))  # fmt: skip
     except (FileNotFoundError, UntrustedFileError, ValueError) as e:
         ap.error(str(e))
     from training.plumbing.outputs import OutDir
@@ -820,9 +827,10 @@ def _export_onnx_command(ap, a) -> int:
     with OutDir.open(a.out.parent) as d:
         d.create_new(a.out.name)  # refused if anything appeared there meanwhile
         d.write(a.out.name, data)
-    print(f"wrote {a.out} ({len(data)} bytes): {summary['snapshot']}/ of {a.policy}; input "
-          f"{INPUT_DOC}; outputs action, env_action; onnxruntime within "
-          f"{summary['max_error']:.2g} of the network")  # fmt: skip
+    print(
+        f"wrote {a.out} ({len(data)} bytes): {which}/ of {a.policy}; input {INPUT_DOC}; "
+        f"outputs action, env_action; onnxruntime within {err:.2g} of the network"
+    )
     return 0
 
 

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from biped_constraint_env.actions import TORQUE_LIMIT_NM
-from training.plumbing.rollouts import run_episodes
 from training.plumbing.common import (
     progress,
 )
 from training.plumbing.outputs import OutDir
+from training.plumbing.rollouts import run_episodes
 from training.plumbing.safe_files import read_npz
 from training.ppo.config import (
     DEMO_SEED_OFFSET,
