@@ -78,8 +78,8 @@ class CompileNote(_event.Listener):
             self.depth += 1
             if self.first is None:
                 self.first = time.monotonic()
-                self._say("compiling the simulator core (once per installation: 1-3 min on "
-                          "2 cores, then cached)")  # fmt: skip
+                self._say("compiling the simulator core (once per installation: about a "
+                          "minute on 2 cores, then cached)")  # fmt: skip
             if self.thread is None:
                 self.thread = threading.Thread(target=self._beat, daemon=True,
                                                name="compile-note")  # fmt: skip
