@@ -130,13 +130,13 @@ def _training_graph() -> dict[str, set[str]]:
     return graph
 
 
-def test_training_has_no_import_circle():
-    graph = _training_graph()
+def _assert_acyclic(graph: dict[str, set[str]], what: str) -> None:
+    """AssertionError naming the first circle of ``graph`` (node -> the nodes it imports)."""
     state: dict[str, int] = {}
 
     def visit(m, path):
         if state.get(m) == 1:
-            raise AssertionError(f"import circle: {' -> '.join([*path, m])}")
+            raise AssertionError(f"{what}: {' -> '.join([*path, m])}")
         if state.get(m) == 2:
             return
         state[m] = 1
@@ -146,6 +146,10 @@ def test_training_has_no_import_circle():
 
     for m in sorted(graph):
         visit(m, [])
+
+
+def test_training_has_no_import_circle():
+    _assert_acyclic(_training_graph(), "import circle")
 
 
 def test_every_reward_kind_has_its_part():
@@ -160,24 +164,8 @@ def test_every_reward_kind_has_its_part():
 def test_trainings_folders_have_no_import_circle():
     """The rooms of training/ (its folders) depend one way: no folder imports a folder that
     imports it back (evaluation reads ppo's policies; ppo runs episodes from plumbing)."""
-    graph = _training_graph()
     rooms: dict[str, set[str]] = {}
-    for m, deps in graph.items():
+    for m, deps in _training_graph().items():
         room = m.split(".")[1]
         rooms.setdefault(room, set()).update(d.split(".")[1] for d in deps)
-    for room in rooms:
-        rooms[room].discard(room)
-    state: dict[str, int] = {}
-
-    def visit(r, path):
-        if state.get(r) == 1:
-            raise AssertionError(f"folder circle: {' -> '.join([*path, r])}")
-        if state.get(r) == 2:
-            return
-        state[r] = 1
-        for d in sorted(rooms.get(r, ())):
-            visit(d, [*path, r])
-        state[r] = 2
-
-    for r in sorted(rooms):
-        visit(r, [])
+    _assert_acyclic({r: deps - {r} for r, deps in rooms.items()}, "folder circle")
