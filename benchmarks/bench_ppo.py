@@ -26,7 +26,9 @@ Rows:
   policy draws them (Gaussian about 0 with its initial std, clipped).
 
 Each figure is the best of ``--rounds`` interleaved rounds. Early in training most episodes
-are short, so these rows include many resets, as a real run's first minutes do.
+are short, so these rows include many resets, as a real run's first minutes do. Three PPO rows
+also say where their wall time goes (:data:`PARTS`, :func:`ppo_breakdown`);
+``benchmarks.bench_ab --ppo CONFIG`` times the same against another checkout.
 """
 
 from __future__ import annotations
