@@ -626,33 +626,6 @@ def test_save_gif_keeps_every_frame_close_to_its_colours(tmp_path):
             assert err.mean() < 2.0 and err.max() <= 64, (k, err.mean(), err.max())
 
 
-@pytest.mark.parametrize(
-    ("toml", "match"),
-    [
-        ('stop_evals = "2"\n', "stop_evals must be an integer, got '2'"),
-        ('learning_rate = "3e-4"\n', "learning_rate must be a number"),
-        ("use_sde = 1\n", "use_sde must be true or false"),
-        ('net_arch = ["128", "128"]\n', "net_arch must be a list"),
-        ("activation = 3\n", "activation must be a string"),
-    ],
-)
-def test_a_config_files_value_of_the_wrong_toml_type_is_refused(tmp_path, toml, match):
-    """Finding: a TOML string was accepted for an integer setting (``stop_evals = "2"``)."""
-    from training.plumbing.common import parse_config
-    from training.ppo.config import PPOConfig
-
-    cfg = tmp_path / "c.toml"
-    cfg.write_text(toml)
-    with pytest.raises(SystemExit):
-        parse_config(PPOConfig, ["--config", str(cfg)], "t")
-    from training.plumbing.common import check_toml_kinds, read_config_file
-
-    with pytest.raises(ValueError, match=match):
-        check_toml_kinds(PPOConfig, read_config_file(cfg), "c.toml")
-    # a flag is text, converted as before
-    assert parse_config(PPOConfig, ["--stop-evals", "2"], "t").stop_evals == 2
-
-
 @pytest.mark.parametrize("damage", ["narrower", "bfloat16"])
 def test_a_start_whose_first_layer_cannot_be_widened_is_refused_in_one_line(tmp_path, damage):
     """Finding: --init-from with a narrower or bfloat16 first layer failed with a raw IndexError

@@ -530,16 +530,31 @@ def test_a_safetensors_file_the_rust_parser_refuses_is_one_line(tmp_path, monkey
         ("[env]\nphysics = {substeps = 100000}\n", "substeps must be at most"),
         ("[env]\nphysics = {step_tol = 1e-10}\n", "step_tol must be at least"),
         ('[env]\naction = {kind = "pd", dt = 1e-9}\n', "pd_dt must be"),
+        # a value of the wrong TOML type (a string was taken for stop_evals = "2")
+        ('stop_evals = "2"\n', "stop_evals must be an integer, got '2'"),
+        ('learning_rate = "3e-4"\n', "learning_rate must be a number"),
+        ("use_sde = 1\n", "use_sde must be true or false"),
+        ('net_arch = ["128", "128"]\n', "net_arch must be a list"),
+        ("activation = 3\n", "activation must be a string"),
     ],
 )
 def test_costly_or_malformed_configs_are_one_line(tmp_path, toml, match):
-    """Findings 5 and 11: a config may not set days of work, nor crash the parser."""
+    """Findings 5 and 11: a config may not set days of work, nor crash the parser; nor pass a
+    value of the wrong type (flags are text and stay converted: see the last test here)."""
     cfg = tmp_path / "c.toml"
     cfg.write_text(toml)
     with pytest.raises(SystemExit) as e:
         train_ppo.main(["--config", str(cfg), "--out-dir", str(tmp_path / "runs")])
     _one_line_refusal(e, match)
     assert not (tmp_path / "runs").exists()
+
+
+def test_a_flag_is_text_converted_to_its_settings_type():
+    from training.plumbing.common import parse_config
+    from training.ppo.config import PPOConfig
+
+    cfg = parse_config(PPOConfig, ["--stop-evals", "2", "--learning-rate", "3e-4"], "t")
+    assert cfg.stop_evals == 2 and cfg.learning_rate == 3e-4
 
 
 def test_the_cli_and_the_config_share_the_control_period_bound():
