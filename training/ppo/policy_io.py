@@ -826,15 +826,17 @@ def _export_onnx_command(ap, a) -> int:
 
     with OutDir.open(a.out.parent) as d:
         d.create_new(a.out.name)  # refused if anything appeared there meanwhile
-        d.write(a.out.name, data)
+        try:
+            d.write(a.out.name, data)
+        except BaseException:  # a full disk, Ctrl-C: not even the empty file is left
+            d.remove(a.out.name)
+            raise
     print(
-        f"wrote {a.out} ({len(data)} bytes): {which}/ of {a.policy}; input {INPUT_DOC}; "
+        f"wrote {a.out} ({len(data)} bytes): {which}/ of {a.policy}; input obs (batch, "
+        f"observation) float64; "
         f"outputs action, env_action; onnxruntime within {err:.2g} of the network"
     )
     return 0
-
-
-INPUT_DOC = "obs (batch, observation) float64"
 
 
 if __name__ == "__main__":
