@@ -279,6 +279,8 @@ def _parser(cls: type, description: str) -> argparse.ArgumentParser:
                                 metavar="KEY=VALUE")  # fmt: skip
         elif getattr(kind, "__origin__", None) is tuple:
             elem = kind.__args__[0]
+            if elem is dict:  # a list of tables ([[schedule]]): the config file's only
+                continue
             parser.add_argument(
                 flag, nargs="+", type=elem, default=None, help=text, metavar=elem.__name__.upper()
             )
@@ -342,7 +344,7 @@ def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> 
     hints = get_type_hints(cls)
     try:
         for f in dataclasses.fields(cls):
-            v = getattr(args, f.name)
+            v = getattr(args, f.name, None)  # a list of tables has no flag
             if v is not None and hints[f.name] is dict:
                 flag = "--" + f.name.replace("_", "-")
                 table = dict(values.get(f.name, {}))
@@ -358,7 +360,7 @@ def parse_config(cls: type[C], argv: Sequence[str] | None, description: str) -> 
 def given_flags(cls: type, argv: Sequence[str] | None) -> set[str]:
     """The fields set by a flag on the command line (not by default or by a config file)."""
     args = _parser(cls, "").parse_args(argv)
-    return {f.name for f in dataclasses.fields(cls) if getattr(args, f.name) is not None}
+    return {f.name for f in dataclasses.fields(cls) if getattr(args, f.name, None) is not None}
 
 
 def toml_value(v: Any) -> str:

@@ -130,19 +130,21 @@ def training_env(
     seed: int,
     monitor_file: Path | None = None,
     env_threads=None,
+    env_steps: int = 0,
 ):
     """The training env of a config: (VecMonitor of the SB3 VecEnv, VecNormalize over it).
 
-    The config's training env options (with its reference-state starts), its time limit and
-    action map; ``env_threads`` overrides ``cfg.env_threads``. With a teacher the policy
-    normalises its observations itself (fixed statistics), so VecNormalize normalises only the
-    returns. With ``stand_std_nm`` or ``stand_branch`` the command and the hip speed are not
-    normalised (:func:`training.ppo.exploration.pin_command`); with ``stand_branch_from`` the
-    observation statistics stay the start's (the branch's input map is exact for them).
+    The config's training env options at ``env_steps`` (its ``[[schedule]]`` entries begun by
+    then; its reference-state starts), its time limit and action map; ``env_threads``
+    overrides ``cfg.env_threads``. With a teacher the policy normalises its observations
+    itself (fixed statistics), so VecNormalize normalises only the returns. With
+    ``stand_std_nm`` or ``stand_branch`` the command and the hip speed are not normalised
+    (:func:`training.ppo.exploration.pin_command`); with ``stand_branch_from`` the observation
+    statistics stay the start's (the branch's input map is exact for them).
     """
     from training.ppo.sb3_vec import BatchVecNormalize
 
-    venv = monitored_env(cfg, seed, monitor_file, env_threads)
+    venv = monitored_env(cfg, seed, monitor_file, env_threads, env_steps)
     vecnorm = BatchVecNormalize(venv, norm_obs=not cfg.teacher, norm_reward=True, gamma=cfg.gamma)
     if cfg.pins_command:
         from training.ppo.exploration import pin_command
@@ -151,24 +153,38 @@ def training_env(
     return venv, vecnorm
 
 
-def monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads):
-    """The config's SB3 VecEnv under a VecMonitor (:func:`training_env`'s inner env)."""
-    from stable_baselines3.common.vec_env import VecMonitor
+PHASE_SEED_STRIDE = 10_000
+"""The training env of the k-th ``[[schedule]]`` phase draws from seed + k x this (k >= 1;
+the first phase from the run's own training seed; at most 64 entries stay below the
+demonstrations' seeds)."""
 
+
+def phase_env(cfg: PPOConfig, seed: int, env_steps: int, env_threads=None):
+    """The SB3 VecEnv of the training env in force at ``env_steps`` (no monitor).
+
+    Its rows draw from ``seed`` + :data:`PHASE_SEED_STRIDE` x the phase's number
+    (:meth:`PPOConfig.phase_at`).
+    """
     from training.ppo.sb3_vec import make_sb3_vec_env
 
-    venv = make_sb3_vec_env(
+    return make_sb3_vec_env(
         cfg.n_envs,
-        seed,
-        cfg.train_env_kwargs(),
+        seed + PHASE_SEED_STRIDE * cfg.phase_at(env_steps),
+        cfg.train_env_kwargs(env_steps),
         cfg.vec,
         cfg.env_id,
         cfg.action_map(),
         num_threads=cfg.env_threads if env_threads is None else env_threads,
         max_episode_steps=cfg.train_max_episode_steps(),
     )
+
+
+def monitored_env(cfg: PPOConfig, seed: int, monitor_file, env_threads, env_steps: int = 0):
+    """The config's SB3 VecEnv under a VecMonitor (:func:`training_env`'s inner env)."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
     venv = VecMonitor(
-        venv,
+        phase_env(cfg, seed, env_steps, env_threads),
         None if monitor_file is None else str(monitor_file),
         info_keywords=("steps_completed", "hip_y", "termination_reason"),
     )

@@ -75,10 +75,13 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
 
 
 def gamma_schedule(cfg: PPOConfig, vecnorm):
-    """A callback: before every rollout the discount :meth:`PPOConfig.gamma_at` gives.
+    """A callback: before every rollout the discounts the config gives at that env step.
 
-    Set where SB3 reads it: the algorithm (bootstrapping at truncation), its rollout buffer
-    (GAE) and the reward normaliser's running return.
+    :meth:`PPOConfig.gamma_at`, set where SB3 reads it: the algorithm (bootstrapping at
+    truncation), its rollout buffer (GAE) and the reward normaliser's running return; with a
+    standing discount, :meth:`PPOConfig.stand_gamma_at` in the rollout buffer
+    (:class:`training.ppo.stand_branch.BranchDiscountBuffer`, which the truncation bootstrap
+    reads too).
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -87,11 +90,62 @@ def gamma_schedule(cfg: PPOConfig, vecnorm):
             return True
 
         def _on_rollout_start(self) -> None:
-            g = cfg.gamma_at(self.model.num_timesteps)
-            self.model.gamma = self.model.rollout_buffer.gamma = vecnorm.gamma = g
+            t = self.model.num_timesteps
+            g = cfg.gamma_at(t)
+            buf = self.model.rollout_buffer
+            self.model.gamma = buf.gamma = vecnorm.gamma = g
             self.logger.record("train/gamma", g)
+            if cfg.stand_gamma > 0:
+                buf.stand_gamma = cfg.stand_gamma_at(t)
+                self.logger.record("train/stand_gamma", buf.stand_gamma)
 
     return GammaSchedule()
+
+
+def env_schedule(cfg: PPOConfig, vecnorm, seed: int, phase: int):
+    """A callback: the training env of each ``[[schedule]]`` phase, from its first rollout.
+
+    Where a phase begins whose training env differs from the one running, before that rollout
+    the VecMonitor's env is replaced by the new phase's
+    (:func:`training.ppo.build.phase_env`), every row reset there and the model's last
+    observation set to the new rows' (normalised by the run's normaliser, whose statistics go
+    on); the episodes running end unrecorded. ``seed``: the run's training seed; ``phase``:
+    the phase the running env is of.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from training.ppo.build import phase_env
+
+    monitor = vecnorm.venv
+
+    class EnvSchedule(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.phase = phase
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_start(self) -> None:
+            t = self.model.num_timesteps
+            k = cfg.phase_at(t)
+            if k == self.phase:
+                return
+            old = cfg.train_env_kwargs(cfg.schedule[self.phase - 1]["at"] if self.phase else 0)
+            self.phase = k
+            if cfg.train_env_kwargs(t) == old:
+                return
+            new = phase_env(cfg, seed, t)
+            monitor.venv.close()
+            monitor.venv = new
+            self.model._last_obs = vecnorm.reset()
+            self.model._last_episode_starts = np.ones(monitor.num_envs, dtype=bool)
+            changed = sorted(cfg.schedule[k - 1].get("train_env", {}))
+            print(f"[schedule] {t} env steps: phase {k} begins; the training env's "
+                  f"{', '.join(changed)} changed, every row starts again", flush=True)  # fmt: skip
+            self.logger.record("train/phase", k)
+
+    return EnvSchedule()
 
 
 def start_curriculum(cfg: PPOConfig, switched_at: int | None):

@@ -41,6 +41,11 @@ class PPOConfig:
     # episodes start from `first` (a start's name or weights) until the mean length of the last
     # 100 training episodes reaches `until_episode_s` [s], then from [train_env]'s start
     # ({}: none; the switch is saved with the checkpoint)
+    schedule: tuple[dict, ...] = ()  # [[schedule]] tables (config file only), each
+    # {at = ENV_STEPS, train_env = {...}, gamma = X, stand_gamma = X}: from the first rollout
+    # at or after `at` env steps, its train_env keys replace those in force (every training
+    # row starts again in that env) and its discounts the run's; entries in increasing `at`,
+    # each holding until the next (stages inside one run; PPOConfig.phase_at)
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
@@ -208,6 +213,7 @@ class PPOConfig:
                 raise ValueError(f"[{name}]: {e}") from None
         if self.init_normalizer != "snapshot" and not self.init_from:
             raise ValueError("--init-normalizer goes with --init-from")
+        self._check_schedule()
         self._check_start_curriculum()  # on the valid training env
         self._check_restart()
         self._check_stand_noise()
@@ -273,6 +279,73 @@ class PPOConfig:
         for name, on in (("use_sde", self.use_sde), ("teacher", self.teacher), small):
             if on:
                 raise ValueError(f"{flag} does not combine with {name}")
+
+    SCHEDULE_KEYS = ("at", "train_env", "gamma", "stand_gamma")
+
+    def _check_schedule(self) -> None:
+        """Refuse a ``[[schedule]]`` entry with a wrong key or value, or an env it cannot run.
+
+        Each phase's training env is made (its settings validated) and must observe what the
+        first phase's does (the network's input is fixed when it is made).
+        """
+        from biped_constraint_env.settings import make_settings
+
+        if not self.schedule:
+            return
+        if self.start_curriculum:
+            raise ValueError("[[schedule]] and [start_curriculum] both change the training "
+                             "starts: give the starts in a [[schedule]] entry")  # fmt: skip
+        first = make_settings(**self.train_env_kwargs()).observation.blocks
+        last = 0
+        for k, e in enumerate(self.schedule):
+            where = f"[[schedule]] entry {k + 1}"
+            unknown = sorted(set(e) - set(self.SCHEDULE_KEYS))
+            if unknown or "at" not in e or len(e) < 2:
+                raise ValueError(f"{where}: takes at (env steps) and one or more of "
+                                 f"{', '.join(self.SCHEDULE_KEYS[1:])}, got {sorted(e)}")  # fmt: skip
+            at = e["at"]
+            if isinstance(at, bool) or not isinstance(at, int) or not last < at <= _BIG:
+                raise ValueError(f"{where}: at must be a whole number of env steps above the "
+                                 f"entry before's ({last}), got {at!r}")  # fmt: skip
+            last = at
+            for name, lo, hi in (("gamma", 0.0, 1.0), ("stand_gamma", 0.0, 0.999999)):
+                v = e.get(name)
+                if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
+                                      or not lo < v <= hi):  # fmt: skip
+                    raise ValueError(f"{where}: {name} must be in ({lo}, {hi}], got {v!r}")
+            if "gamma" in e and self.gamma_final > 0:
+                raise ValueError(f"{where}: gamma and --gamma-final both set the discount: "
+                                 f"give one")  # fmt: skip
+            if "stand_gamma" in e and self.stand_gamma <= 0:
+                raise ValueError(f"{where}: stand_gamma needs the run's --stand-gamma (> 0)")
+            if "train_env" in e:
+                if not isinstance(e["train_env"], dict) or not e["train_env"]:
+                    raise ValueError(f"{where}: train_env must be a table of [train_env] keys")
+                if "render_mode" in e["train_env"]:
+                    raise ValueError(f"{where}: train_env render_mode is not a setting of a "
+                                     f"config")  # fmt: skip
+                try:
+                    blocks = make_settings(**self.train_env_kwargs(at)).observation.blocks
+                except (ValueError, TypeError) as err:
+                    raise ValueError(f"{where}: train_env: {err}") from None
+                if blocks != first:
+                    raise ValueError(f"{where}: train_env changes the observation ({first} to "
+                                     f"{blocks}): the network's input is fixed")  # fmt: skip
+
+    def phase_at(self, env_steps: int) -> int:
+        """The ``[[schedule]]`` entries in force at ``env_steps``: how many have begun (0: none)."""
+        return sum(e["at"] <= env_steps for e in self.schedule)
+
+    def _scheduled(self, name: str, env_steps: int, default):
+        """The last value of ``name`` the entries begun at ``env_steps`` give, else ``default``."""
+        for e in reversed(self.schedule[: self.phase_at(env_steps)]):
+            if name in e:
+                return e[name]
+        return default
+
+    def stand_gamma_at(self, env_steps: int) -> float:
+        """The standing rows' discount at ``env_steps`` (:attr:`stand_gamma`, or a schedule's)."""
+        return float(self._scheduled("stand_gamma", env_steps, self.stand_gamma))
 
     RESTART_KEYS = ("every", "window", "min_steps", "max")
 
@@ -345,9 +418,10 @@ class PPOConfig:
             raise ValueError(f"resume must be empty in a saved config, got {self.resume!r}")
 
     def gamma_at(self, env_steps: int) -> float:
-        """The discount at ``env_steps`` (:attr:`gamma`, ramped to :attr:`gamma_final`)."""
+        """The discount at ``env_steps`` (:attr:`gamma`, ramped to :attr:`gamma_final`, or a
+        schedule's)."""
         if self.gamma_final <= 0:
-            return self.gamma
+            return float(self._scheduled("gamma", env_steps, self.gamma))
         a, b = self.gamma_ramp
         f = 1.0 if env_steps >= b else 0.0 if env_steps <= a else (env_steps - a) / (b - a)
         return self.gamma + f * (self.gamma_final - self.gamma)
@@ -367,9 +441,13 @@ class PPOConfig:
             return dict(self.env)
         return with_keys(self.env, "start", kind=start_name(own or "midstride"))
 
-    def train_env_kwargs(self) -> dict:
-        """Keyword arguments of the training env: ``[env]`` with ``[train_env]`` on top."""
-        return {**self.env, **self.train_env}
+    def train_env_kwargs(self, env_steps: int = 0) -> dict:
+        """Keyword arguments of the training env at ``env_steps``: ``[env]``, ``[train_env]`` on
+        top, then the ``train_env`` keys of each ``[[schedule]]`` entry begun by then."""
+        kwargs = {**self.env, **self.train_env}
+        for e in self.schedule[: self.phase_at(env_steps)]:
+            kwargs.update(e.get("train_env", {}))
+        return kwargs
 
     def settings(self):
         """The validated settings of the env the policy runs in (:mod:`biped_constraint_env`)."""

@@ -391,7 +391,7 @@ def truncation_discount(stand_gamma: float, rows: str = "branch"):
     class TruncationDiscount(BaseCallback):
         def _on_step(self) -> bool:
             m = self.model
-            extra = stand_gamma - m.gamma
+            extra = getattr(m.rollout_buffer, "stand_gamma", stand_gamma) - m.gamma
             dones, infos, rewards = (self.locals[k] for k in ("dones", "infos", "rewards"))
             if extra == 0 or not dones.any():
                 return True

@@ -46,6 +46,7 @@ from training.ppo.callbacks import (
     check_restart_checked,
     check_restarts,
     critic_warmup,
+    env_schedule,
     gamma_schedule,
     make_callbacks,
     progress_bar,
@@ -173,7 +174,8 @@ def _main(cfg: PPOConfig, run: OutDir, extend: bool = False) -> int:
             print(f"eval.csv: {dropped} evaluation(s) after the checkpoint ({start} env steps) "
                   f"will be redone", flush=True)  # fmt: skip
     # one monitor file per session, named by the env step it starts from (never overwritten)
-    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, new_monitor_file(run, start))
+    venv, vecnorm = training_env(cfg, TRAIN_SEED_OFFSET + cfg.seed, new_monitor_file(run, start),
+                                 env_steps=start)  # fmt: skip
     try:
         return _train(cfg, run, venv, vecnorm, checkpoint, extend)
     finally:
@@ -513,7 +515,11 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                     callback,
                     critic_warmup(cfg, anchor),
                     update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
-                    *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0 else []),
+                    *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0
+                      or any({"gamma", "stand_gamma"} & set(e) for e in cfg.schedule) else []),
+                    *([env_schedule(cfg, vecnorm, TRAIN_SEED_OFFSET + cfg.seed,
+                                    cfg.phase_at(model.num_timesteps))]
+                      if any("train_env" in e for e in cfg.schedule) else []),
                     *([branch_discount] if branch_discount else []),
                     *([curriculum] if curriculum else []),
                     *([redraw] if redraw else []),
