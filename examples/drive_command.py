@@ -24,7 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 import biped_constraint_env  # noqa: F401  (registers ConstrainedBiped-v0)
-from training.evaluation.command_protocol import period_speeds, stands
+from training.plumbing.command_protocol import period_speeds, stands
 from training.ppo.policy_io import load_policy, policy_actor
 
 SCHEDULE = ((8.0, 1.5), (16.0, 0.0), (26.0, 1.0))
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     print("  second  command held at its start [m/s]  hip speed [m/s]")
     for k in seconds:
         print(f"{k:4d}-{k + 1:<3d}  {held[int(np.searchsorted(ts, k))]:32.2f}  {speed[k]:15.3f}")
-    # the protocol's stop test (training.evaluation.command_protocol.stands) from the moment
+    # the protocol's stop test (training.plumbing.command_protocol.stands) from the moment
     # the drive sets 0: at rest within 3 s, held 5 s
     t, v = period_speeds({"t": ts, "hip_y": ys})
     stood, drift = stands(t, v, SCHEDULE[0][0], ts[-1])

@@ -469,7 +469,7 @@ def test_a_restart_from_standing_gets_the_whole_limit_from_the_new_command():
 
 
 def test_protocol_measures_stride_speed_and_sets_commands_between_periods(monkeypatch):
-    from training.evaluation import command_protocol as cp
+    from training.plumbing import command_protocol as cp
 
     # a synthetic walk at 1.2 m/s with a step every 0.4 s: stride speed error 0.2 at 1.0 m/s
     t = np.arange(0, 10.0, 0.02)

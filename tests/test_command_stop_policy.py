@@ -110,7 +110,7 @@ def test_the_network_alone_walks_stops_stands_and_walks_again_from_rest():
     import torch
 
     from biped_constraint_env.settings import make_settings
-    from training.evaluation.command_protocol import period_speeds, run_commanded, stands
+    from training.plumbing.command_protocol import period_speeds, run_commanded, stands
     from training.ppo.policy_io import available, load_policy, policy_batch_actor
     from training.ppo.stand_branch import StandBranchPolicy
 

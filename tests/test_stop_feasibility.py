@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from training.evaluation.command_protocol import HOLD_S, STOP_WITHIN_S, period_speeds, stands
+from training.plumbing.command_protocol import HOLD_S, STOP_WITHIN_S, period_speeds, stands
 from training.evaluation.stop_feasibility import KD, KP, _at, rollout
 
 T = np.arange(1, 601) * 0.02  # period ends over 12 s

@@ -74,7 +74,7 @@ def test_standing_still_at_a_zero_command_never_ends_by_it():
         tau = np.clip(-100 * (st.q[1:] - q0[1:]) - 10 * st.qd[1:], -150, 150)
         _, _, te, tr, info = env.step(tau.astype(np.float32))
         assert not te and not tr, info["termination_reason"]
-    from training.evaluation.command_protocol import STAND_SPEED_M_S
+    from training.plumbing.command_protocol import STAND_SPEED_M_S
 
     assert STOP_SPEED_M_S == 2 * STAND_SPEED_M_S  # the protocol's bound on a stand's periods
 

@@ -16,7 +16,7 @@ from collections import Counter
 import numpy as np
 import torch
 
-from training.evaluation import command_protocol as cp
+from training.plumbing import command_protocol as cp
 from training.plumbing.stats import success
 from training.ppo.policy_io import load_policy, policy_batch_actor
 

@@ -10,7 +10,7 @@ import sys
 
 import torch
 
-from training.evaluation import command_protocol as cp
+from training.plumbing import command_protocol as cp
 from training.ppo.policy_io import load_policy, policy_batch_actor
 
 torch.set_num_threads(1)

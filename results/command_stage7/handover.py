@@ -29,7 +29,7 @@ import torch
 import biped_constraint_env  # noqa: F401
 from biped_constraint_env.observation import OBS_NAMES
 from biped_constraint_env.simulator import evaluate
-from training.evaluation import command_protocol as cp
+from training.plumbing import command_protocol as cp
 from training.ppo.policy_io import load_policy, policy_actor, policy_batch_actor
 
 torch.set_num_threads(1)

@@ -13,7 +13,7 @@ import sys
 import torch
 
 from biped_constraint_env.settings import with_keys
-from training.evaluation import command_protocol as cp
+from training.plumbing import command_protocol as cp
 from training.ppo.policy_io import load_policy, policy_batch_actor
 
 torch.set_num_threads(1)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from training.evaluation.command_protocol import START_COMMAND_M_S, run_commanded
+from training.plumbing.command_protocol import START_COMMAND_M_S, run_commanded
 from training.plumbing.stats import MIN_STEPS, wilson_interval
 from training.plumbing.outputs import write_file
 from training.ppo.policy_io import load_policy, policy_batch_actor

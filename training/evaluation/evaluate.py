@@ -402,7 +402,7 @@ def _evaluate(args, loop: dict, start, out_dir, t0, shown=None) -> None:
     label = f"{loop['label']} ({start} start)"
     protocol = None
     if cfg.env_kwargs().get("task") == "command":  # the command task's own protocol first
-        from training.evaluation import command_protocol
+        from training.plumbing import command_protocol
 
         print("the command task's protocol: start, tracking, stop and restart, sequences",
               flush=True)  # fmt: skip

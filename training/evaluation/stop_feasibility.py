@@ -4,7 +4,7 @@ The command policy walks on at a zero command (its stop row is 0%). This study a
 that is the physics or the learning: from states of the policy's own walk (where a zero
 command would arrive), CMA-ES (the ``cma`` package) searches torques that bring the biped to
 rest and hold it there, judged by the protocol's stop test
-(:func:`training.evaluation.command_protocol.stands`: at rest within 3 s, held 5 s), under
+(:func:`training.plumbing.command_protocol.stands`: at rest within 3 s, held 5 s), under
 the default strict physics. The torques, held over each 20 ms period:
 
     tau = clip(-KP (q - target(t)) - KD qd + ff(t), -150, 150) N m
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.evaluation.command_protocol import HOLD_S, STOP_WITHIN_S, stands
+from training.plumbing.command_protocol import HOLD_S, STOP_WITHIN_S, stands
 from training.plumbing.common import CliParser, command
 from training.plumbing.outputs import command_output, write_file
 

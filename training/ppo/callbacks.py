@@ -394,6 +394,8 @@ def selection_score(row: dict, select_by: str) -> float:
     episodes first, or with ``select_by="return"`` the mean return (a task whose reward is
     the measure: following a command, standing at zero).
     """
+    if select_by == "protocol":
+        return float(row["protocol_score"])
     if select_by == "return":
         return float(row["return_mean"])
     score = float(row["steps_mean"] + 1e-3 * row["distance_mean_m"])
@@ -507,6 +509,23 @@ def make_callbacks(
                 cfg.env_id,
             )
 
+        def _protocol(self, row: dict) -> bool:
+            """The command protocol on the selection seeds: its columns into ``row``; all met?"""
+            from training.plumbing import command_protocol as cp
+
+            act = policy_batch_actor(self.model.policy, _vecnorm_normalizer(vecnorm), cfg)
+            seeds = range(SELECTION_SEED_OFFSET, SELECTION_SEED_OFFSET + cfg.eval_episodes)
+            rows = cp.run_protocol(act, cfg.env_kwargs(), seeds, cfg.env_id)
+            met = cp.goals(rows)
+            row["protocol_score"] = cp.selection_score(rows)
+            row["goals_met"] = f"{sum(met.values())}/{len(met)}"
+            figures = {r["row"]: r["success"]["rate"] if "success" in r
+                       else r["mean_abs_error_m_s"] for r in rows}  # fmt: skip
+            row["protocol"] = json.dumps({k: round(v, 4) if np.isfinite(v) else None
+                                          for k, v in figures.items()})  # fmt: skip
+            self.logger.record("eval/goals_met", sum(met.values()))
+            return all(met.values())
+
         def _evaluate(self, n):
             eps = self._episodes(0, cfg.eval_episodes)
             if (
@@ -516,11 +535,13 @@ def make_callbacks(
             ):  # the same network on the next selection seeds
                 eps += self._episodes(cfg.eval_episodes, cfg.stop_confirm_episodes)
             row = _eval_row(eps, n, time.time() - self.t0)
+            all_met = self._protocol(row) if cfg.select_by == "protocol" else False
             _append_csv(run, "eval.csv", row)
             for k in ("steps_mean", "distance_mean_m", "return_mean"):
                 self.logger.record(f"eval/{k}", row[k])
-            if cfg.stop_min_steps > 0:
-                met = row["steps_min"] >= cfg.stop_min_steps
+            if cfg.stop_min_steps > 0 or cfg.select_by == "protocol":
+                met = all_met if cfg.select_by == "protocol" else \
+                    row["steps_min"] >= cfg.stop_min_steps  # fmt: skip
                 self.streak = self.streak + 1 if met else 0
                 self.stopped = self.streak >= cfg.stop_evals
             score = selection_score(row, cfg.select_by)
@@ -532,9 +553,10 @@ def make_callbacks(
                     {"num_timesteps": n, "score": score, "steps_mean": float(row["steps_mean"])},
                     vecnorm,
                 )
+            goals = f", goals {row['goals_met']} {row['protocol']}" if "protocol" in row else ""
             print(
                 f"[eval] {n} env steps: steps {row['steps_mean']:.2f} (min {row['steps_min']}), "
-                f"distance {row['distance_mean_m']:.2f} m, ends {row['reasons']} "
+                f"distance {row['distance_mean_m']:.2f} m, ends {row['reasons']}{goals} "
                 f"({time.time() - self.t0:.0f} s)",
                 flush=True,
             )
@@ -551,5 +573,8 @@ def stop_reason(cfg: PPOConfig) -> str:
              else "an evaluation")  # fmt: skip
     confirm = (f" ({cfg.eval_episodes} + {cfg.stop_confirm_episodes} episodes of the same "
                "network)" if cfg.stop_confirm_episodes > 0 else "")  # fmt: skip
+    if cfg.select_by == "protocol":
+        return (f"the command protocol's rows met every goal on {cfg.eval_episodes} selection "
+                f"episodes each in {where}")  # fmt: skip
     steps = cfg.stop_min_steps
     return f"every selection episode completed at least {steps} steps in {where}{confirm}"

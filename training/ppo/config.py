@@ -81,7 +81,10 @@ class PPOConfig:
     eval_episodes: int = 10  # episodes per evaluation, on the selection seeds (all at once,
     # in the batched env)
     select_by: str = "mean"  # best/: the most steps ("mean", "min") or the mean return
-    # (the fewest steps of its episodes first, then the mean)
+    # (the fewest steps of its episodes first, then the mean); "protocol" (task "command"):
+    # the command protocol's rows (start, tracking, stop, restart, sequences) on eval_episodes
+    # selection episodes each, the most goals met first; the run stops once every goal holds
+    # in stop_evals consecutive evaluations
     stop_min_steps: int = 0  # > 0: the run stops by itself once every selection episode
     # completed at least this many steps in stop_evals consecutive evaluations (its own
     # criterion, on the selection seeds); 0: it trains to total_timesteps
@@ -213,6 +216,9 @@ class PPOConfig:
                 raise ValueError(f"[{name}]: {e}") from None
         if self.init_normalizer != "snapshot" and not self.init_from:
             raise ValueError("--init-normalizer goes with --init-from")
+        if self.select_by == "protocol" and self.settings().command is None:
+            raise ValueError("--select-by protocol runs the command protocol: it needs an env "
+                             "with a command ([env] task = \"command\")")  # fmt: skip
         self._check_schedule()
         self._check_start_curriculum()  # on the valid training env
         self._check_restart()
@@ -555,7 +561,7 @@ def _choices() -> dict[str, tuple]:
         "env_id": (ENV_ID,),  # the registered id only: "module:Id" would import module
         "vec": ("batched", "subproc", "dummy"),
         "lr_schedule": ("constant", "linear"),
-        "select_by": ("mean", "min", "return"),
+        "select_by": ("mean", "min", "return", "protocol"),
         "init_normalizer": ("snapshot", "fresh"),
         "stand_gamma_rows": ("branch", "zero_command"),
         "learn_rows": ("all", "zero_command"),

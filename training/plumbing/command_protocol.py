@@ -419,3 +419,47 @@ def markdown(rows: list[dict]) -> str:
                    f"{math.nan if cot is None else cot:.2f}")  # fmt: skip
         out.append(f"| {r['row']} | {res} | {r.get('ends', '')} |")
     return "\n".join(out) + "\n"
+
+
+SUCCESS_GOAL = 0.99
+"""The goal of the start, stop, restart and sequence rows: this share of episodes or more."""
+TRACK_GOAL_M_S = 0.10
+"""The goal of each tracking row: a mean |stride speed - command| at most this [m/s], with
+every episode running its 30 s."""
+DRIFT_GOAL_M_S = 0.05
+"""The goal of the stop row's drift (the hold's mean |hip speed|) [m/s]."""
+
+
+def goals(rows: list[dict]) -> dict[str, bool]:
+    """Whether each row of :func:`run_protocol`'s ``rows`` meets its goal, by row name.
+
+    Start, stop, restart and sequences: a success rate of at least :data:`SUCCESS_GOAL` (the
+    stop's drift at most :data:`DRIFT_GOAL_M_S` too); tracking: :data:`TRACK_GOAL_M_S`, every
+    episode having run 30 s.
+    """
+    out = {}
+    for r in rows:
+        if "success" in r:
+            ok = r["success"]["rate"] >= SUCCESS_GOAL
+            if "drift_m_s_mean" in r:
+                ok = ok and r["drift_m_s_mean"] <= DRIFT_GOAL_M_S
+        else:
+            err = r["mean_abs_error_m_s"]
+            ok = r["ran_30s"] == r["episodes"] and math.isfinite(err) and err <= TRACK_GOAL_M_S
+        out[r["row"]] = bool(ok)
+    return out
+
+
+def selection_score(rows: list[dict]) -> float:
+    """A run's score of the protocol's ``rows`` (``select_by = "protocol"``): higher is better.
+
+    The number of goals met (:func:`goals`), plus, within [0, 1): half the mean success rate
+    of the rows that have one and half of 1 - the worst tracking error over 1 m/s (an
+    unmeasured row's error counts as 1 m/s), so that two networks meeting as many goals rank
+    by how close they come to the rest.
+    """
+    rates = [r["success"]["rate"] for r in rows if "success" in r]
+    errs = [r["mean_abs_error_m_s"] for r in rows if "success" not in r]
+    worst = max((e if math.isfinite(e) else 1.0 for e in errs), default=0.0)
+    return (sum(goals(rows).values()) + 0.5 * float(np.mean(rates or [0.0]))
+            + 0.5 * (1.0 - min(worst, 1.0)) * 0.999)  # fmt: skip
