@@ -195,6 +195,7 @@ class PPOConfig:
             raise ValueError("--gamma-final and --gamma-ramp FROM TO (FROM <= TO) go together")
         if self.batch_size > self.n_steps * self.n_envs:
             raise ValueError("--batch-size must be at most --n-steps x --n-envs")  # fmt: skip
+        self._check_schedule_entries()  # before any phase's env is read
         from biped_constraint_env.reference import OWN_REFERENCE, REFERENCES
         from biped_constraint_env.settings import make_settings
 
@@ -288,20 +289,11 @@ class PPOConfig:
 
     SCHEDULE_KEYS = ("at", "train_env", "gamma", "stand_gamma")
 
-    def _check_schedule(self) -> None:
-        """Refuse a ``[[schedule]]`` entry with a wrong key or value, or an env it cannot run.
-
-        Each phase's training env is made (its settings validated) and must observe what the
-        first phase's does (the network's input is fixed when it is made).
-        """
-        from biped_constraint_env.settings import make_settings
-
-        if not self.schedule:
-            return
-        if self.start_curriculum:
+    def _check_schedule_entries(self) -> None:
+        """Refuse a ``[[schedule]]`` entry with a wrong key or value (ValueError naming it)."""
+        if self.schedule and self.start_curriculum:
             raise ValueError("[[schedule]] and [start_curriculum] both change the training "
                              "starts: give the starts in a [[schedule]] entry")  # fmt: skip
-        first = make_settings(**self.train_env_kwargs()).observation.blocks
         last = 0
         for k, e in enumerate(self.schedule):
             where = f"[[schedule]] entry {k + 1}"
@@ -330,6 +322,21 @@ class PPOConfig:
                 if "render_mode" in e["train_env"]:
                     raise ValueError(f"{where}: train_env render_mode is not a setting of a "
                                      f"config")  # fmt: skip
+
+    def _check_schedule(self) -> None:
+        """Refuse a ``[[schedule]]`` phase whose training env cannot run.
+
+        Each phase's training env is made (its settings validated) and must observe what the
+        first phase's does (the network's input is fixed when it is made).
+        """
+        from biped_constraint_env.settings import make_settings
+
+        if not self.schedule:
+            return
+        first = make_settings(**self.train_env_kwargs()).observation.blocks
+        for k, e in enumerate(self.schedule):
+            where, at = f"[[schedule]] entry {k + 1}", e["at"]
+            if "train_env" in e:
                 try:
                     blocks = make_settings(**self.train_env_kwargs(at)).observation.blocks
                 except (ValueError, TypeError) as err:
