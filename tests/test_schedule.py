@@ -162,7 +162,7 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     # the first phase's env from the start, the second's at the rollout that begins at 2 x 512
     assert [n for n, _ in made] == [0, 2 * rollout]
     assert made[0][1].push_impulse_ns is None and made[1][1].push_impulse_ns == (-1.0, 1.0)
-    (model, initial), = models
+    ((model, initial),) = models
     assert isinstance(model.policy, StandBranchPolicy) and model.policy.brake_branch
     final = model.policy.state_dict()
     for actor in ("mlp_extractor.policy_net.0.weight", "branch_net.0.weight",

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 import biped_constraint_env  # noqa: F401
-from training.plumbing.command_protocol import HOLD_S, STOP_WITHIN_S, period_speeds, stands
 from training.evaluation.stop_feasibility import KD, KP, _at, rollout
+from training.plumbing.command_protocol import HOLD_S, STOP_WITHIN_S, period_speeds, stands
 
 T = np.arange(1, 601) * 0.02  # period ends over 12 s
 

@@ -299,8 +299,9 @@ class PPOConfig:
             where = f"[[schedule]] entry {k + 1}"
             unknown = sorted(set(e) - set(self.SCHEDULE_KEYS))
             if unknown or "at" not in e or len(e) < 2:
-                raise ValueError(f"{where}: takes at (env steps) and one or more of "
-                                 f"{', '.join(self.SCHEDULE_KEYS[1:])}, got {sorted(e)}")  # fmt: skip
+                more = ", ".join(self.SCHEDULE_KEYS[1:])
+                raise ValueError(f"{where}: takes at (env steps) and one or more of {more}, "
+                                 f"got {sorted(e)}")  # fmt: skip
             at = e["at"]
             if isinstance(at, bool) or not isinstance(at, int) or not last < at <= _BIG:
                 raise ValueError(f"{where}: at must be a whole number of env steps above the "
@@ -431,8 +432,7 @@ class PPOConfig:
             raise ValueError(f"resume must be empty in a saved config, got {self.resume!r}")
 
     def gamma_at(self, env_steps: int) -> float:
-        """The discount at ``env_steps`` (:attr:`gamma`, ramped to :attr:`gamma_final`, or a
-        schedule's)."""
+        """The discount at ``env_steps`` (:attr:`gamma`, its ramp's or a schedule's)."""
         if self.gamma_final <= 0:
             return float(self._scheduled("gamma", env_steps, self.gamma))
         a, b = self.gamma_ramp
@@ -455,8 +455,11 @@ class PPOConfig:
         return with_keys(self.env, "start", kind=start_name(own or "midstride"))
 
     def train_env_kwargs(self, env_steps: int = 0) -> dict:
-        """Keyword arguments of the training env at ``env_steps``: ``[env]``, ``[train_env]`` on
-        top, then the ``train_env`` keys of each ``[[schedule]]`` entry begun by then."""
+        """Keyword arguments of the training env at ``env_steps``.
+
+        ``[env]``, ``[train_env]`` on top, then the ``train_env`` keys of each ``[[schedule]]``
+        entry begun by then.
+        """
         kwargs = {**self.env, **self.train_env}
         for e in self.schedule[: self.phase_at(env_steps)]:
             kwargs.update(e.get("train_env", {}))

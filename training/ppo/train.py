@@ -503,6 +503,12 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
         from training.ppo.stand_branch import truncation_discount
 
         branch_discount = truncation_discount(cfg.stand_gamma, cfg.stand_gamma_rows)
+    schedules = []  # what changes with the env step: the discounts, the training env
+    if cfg.gamma_final > 0 or any({"gamma", "stand_gamma"} & set(e) for e in cfg.schedule):
+        schedules.append(gamma_schedule(cfg, vecnorm))
+    if any("train_env" in e for e in cfg.schedule):
+        phase = cfg.phase_at(model.num_timesteps)
+        schedules.append(env_schedule(cfg, vecnorm, TRAIN_SEED_OFFSET + cfg.seed, phase))
     callback = make_callbacks(cfg, run, vecnorm, best, float(wall0), 0 if extend else streak,
                               more_state)  # fmt: skip
     callback.stopped = stopped
@@ -515,11 +521,7 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
                     callback,
                     critic_warmup(cfg, anchor),
                     update_threads(cfg.torch_threads, cfg.update_threads or cfg.torch_threads),
-                    *([gamma_schedule(cfg, vecnorm)] if cfg.gamma_final > 0
-                      or any({"gamma", "stand_gamma"} & set(e) for e in cfg.schedule) else []),
-                    *([env_schedule(cfg, vecnorm, TRAIN_SEED_OFFSET + cfg.seed,
-                                    cfg.phase_at(model.num_timesteps))]
-                      if any("train_env" in e for e in cfg.schedule) else []),
+                    *schedules,
                     *([branch_discount] if branch_discount else []),
                     *([curriculum] if curriculum else []),
                     *([redraw] if redraw else []),
