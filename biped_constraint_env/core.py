@@ -21,7 +21,7 @@ from .command import CommandReward, Commands
 from .gait import GaitReward
 from .model import N_ACTUATED
 from .modes import EventCode
-from .observation import OBSERVATION_BLOCKS, observation_space
+from .observation import OBSERVATION_BLOCKS, observation_names, observation_space
 from .period import EnvBuffers
 from .perturbations import Perturbations
 from .rewards import (
@@ -102,6 +102,7 @@ class EnvCore:
         s, p, a = settings, settings.physics, settings.action
         self.settings, self.n = s, n
         self.observation_space = observation_space(s.observation.blocks)
+        self.observation_names = observation_names(s.observation.blocks)
         self.clock = ContactClock(n, p.dt) if s.needs_clock else None
         self.tracking = Tracking(n, s, self.clock) if s.needs_reference else None
         self.action_part = action_part(a, n, self.tracking)

@@ -391,6 +391,7 @@ class ConstrainedBipedEnv(gym.Env):
         a = s.action.bound
         self.action_space = spaces.Box(-a, a, (N_ACTUATED,), np.float32)
         self.observation_space = self.core.observation_space
+        self.observation_names = self.core.observation_names  # entry names, in order
         self._act = self.core.buf.act
         self._rows = np.zeros(1, np.int64)
         limit = s.time_limit_s  # truncation at t >= limit (to round-off); None: never

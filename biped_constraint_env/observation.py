@@ -158,6 +158,11 @@ OBSERVATION_BLOCKS: dict[str, ObservationBlock] = {
 one entry here (``observation=[name]`` appends it); "command" comes with the command option."""
 
 
+def observation_names(blocks: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The observation's entry names, in order: :data:`OBS_NAMES`, then each block's."""
+    return OBS_NAMES + tuple(n for b in blocks for n in OBSERVATION_BLOCKS[b].names)
+
+
 def observation_space(blocks: tuple[str, ...] = ()) -> spaces.Box:
     """The observation Box: the base entries, then each block of ``blocks``.
 

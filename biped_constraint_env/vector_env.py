@@ -97,6 +97,7 @@ class ConstrainedBipedVectorEnv(VectorEnv):
         bound = s.action.bound
         self.single_action_space = spaces.Box(-bound, bound, (N_ACTUATED,), np.float32)
         self.single_observation_space = self.core.observation_space
+        self.observation_names = self.core.observation_names  # entry names, in order
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.params, self.options, self.dt = s.physics.params, s.physics.options, s.dt

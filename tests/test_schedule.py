@@ -125,7 +125,7 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     schedule's env begins at the first rollout at or after its step, and the protocol selects."""
     from training.plumbing import common
     from training.ppo import build, train
-    from training.ppo.stand_branch import StandBranchPolicy
+    from training.ppo.experts import ExpertsPolicy
 
     values = read_config_file(RECIPE)
     assert "init_from" not in values  # a random network to start
@@ -163,10 +163,11 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     assert [n for n, _ in made] == [0, 2 * rollout]
     assert made[0][1].push_impulse_ns is None and made[1][1].push_impulse_ns == (-1.0, 1.0)
     ((model, initial),) = models
-    assert isinstance(model.policy, StandBranchPolicy) and model.policy.brake_branch
+    assert isinstance(model.policy, ExpertsPolicy)
+    assert [name for name, _, _ in model.policy.experts] == ["stand", "brake"]
     final = model.policy.state_dict()
-    for actor in ("mlp_extractor.policy_net.0.weight", "branch_net.0.weight",
-                  "brake_net.0.weight"):  # fmt: skip
+    for actor in ("mlp_extractor.policy_net.0.weight", "actors.0.0.weight", "actors.1.0.weight",
+                  "critics.stand.0.0.weight"):  # fmt: skip
         assert not torch.equal(final[actor], initial[actor]), actor  # every actor learned
     (run,) = (tmp_path / "runs" / "train_ppo").iterdir()
     eval_csv = (run / "eval.csv").read_text()

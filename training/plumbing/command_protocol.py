@@ -74,6 +74,7 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
     n = len(seeds)
     first = np.broadcast_to(np.asarray(command(np.zeros(n), 0), dtype=float), (n,))  # t = 0
     obs, info = venv.reset(seed=[int(s) for s in seeds], options={"command": first})
+    entry = venv.unwrapped.observation_names.index("command_m_s")
     live = np.ones(n, bool)
     hip = [[float(info["hip_y"][i])] for i in range(n)]
     ts = [[float(info["t"][i])] for i in range(n)]
@@ -89,7 +90,7 @@ def run_commanded(act, env_kwargs: dict, seeds: Sequence[int], command: Callable
         if hook is not None:
             hook(venv.unwrapped.core, live, step_t)
         obs = obs.copy()
-        obs[:, -1] = held  # the command's entry (the observation's last) as the env now gives it
+        obs[:, entry] = held  # the command's entry as the env now gives it
         tau = np.asarray(act(obs), dtype=np.float64)
         tau[~live] = 0.0
         obs, _, term, trunc, info = venv.step(tau)

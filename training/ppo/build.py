@@ -45,6 +45,10 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         from training.ppo.stand_branch import StandBranchPolicy
 
         policy = StandBranchPolicy
+    elif cfg.policy == "experts":
+        from training.ppo.experts import ExpertsPolicy
+
+        policy = ExpertsPolicy
     # the callback (stand_balance, learn_rows) normalises the advantages, once per rollout
     extra = {"normalize_advantage": False} if cfg.stand_balance or cfg.learn_rows != "all" else {}
     if cfg.stand_gamma > 0:
@@ -52,7 +56,8 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
 
         extra["rollout_buffer_class"] = BranchDiscountBuffer
         extra["rollout_buffer_kwargs"] = {"stand_gamma": cfg.stand_gamma,
-                                          "rows": cfg.stand_gamma_rows}  # fmt: skip
+                                          "rows": cfg.stand_gamma_rows,
+                                          "command_entry": cfg.obs_names().index("command_m_s")}  # fmt: skip
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)
@@ -89,16 +94,22 @@ def initial_actions(model, cfg: PPOConfig) -> None:
     """
     import torch
 
+    p = model.policy
+    log_stds = [p.log_std, *getattr(p, "log_stds", ())]  # every expert's (training.ppo.experts)
+    heads = [p.action_net, *getattr(p, "heads", ())]
     if len(cfg.log_std_joints) == 5:
-        model.policy.log_std.data[:] = torch.as_tensor(cfg.log_std_joints)
+        for log_std in log_stds:
+            log_std.data[:] = torch.as_tensor(cfg.log_std_joints)
     elif cfg.log_std_joints:
         raise ValueError("--log-std-joints needs 5 values (one per joint) or none")
     gear = torch.as_tensor(cfg.action_map().gear, dtype=torch.float32)
     if cfg.action_std_nm > 0:
-        model.policy.log_std.data[:] = torch.log(cfg.action_std_nm / gear)
+        for log_std in log_stds:
+            log_std.data[:] = torch.log(cfg.action_std_nm / gear)
     if cfg.action_bias_nm:
         bias = torch.as_tensor(cfg.action_bias_nm, dtype=torch.float32)
-        model.policy.action_net.bias.data[:] = bias / gear
+        for head in heads:
+            head.bias.data[:] = bias / gear
 
 
 def redraw_network(model, cfg: PPOConfig, seed: int) -> None:
@@ -149,7 +160,7 @@ def training_env(
     if cfg.pins_command:
         from training.ppo.exploration import pin_command
 
-        pin_command(vecnorm, frozen=bool(cfg.stand_branch_from))
+        pin_command(vecnorm, cfg.pinned_entries(), frozen=bool(cfg.stand_branch_from))
     return venv, vecnorm
 
 

@@ -74,6 +74,13 @@ class PPOConfig:
     sde_sample_freq: int = -1  # with use_sde: periods between new noise matrices (-1: rollout)
     net_arch: tuple[int, ...] = (256, 256)  # hidden layers of the actor and the critic
     activation: str = "tanh"  # hidden activation: "tanh" (SB3's default), "relu" or "elu"
+    policy: str = "mlp"  # the network: "mlp" (SB3's actor and critic) or "experts" (one actor
+    # more per [[experts]] table, the gate data over named observation entries;
+    # training.ppo.experts)
+    experts: tuple[dict, ...] = ()  # [[experts]] tables (config file only), each {name = S,
+    # when = {ENTRY = VALUE, ...}, critic = "own" or "shared"}: that actor acts on the rows
+    # whose named observation entries (biped_constraint_env.observation.observation_names)
+    # all equal their values, the first table that matches; elsewhere the first actor, "walk"
     torch_threads: int = 1  # torch threads (1: the env and torch do not fight for 2 cores)
     update_threads: int = 0  # torch threads in PPO's updates, when the env is idle
     # (0: torch_threads; 2 on an otherwise idle 2-core machine, 1 with two runs side by side)
@@ -221,6 +228,7 @@ class PPOConfig:
             raise ValueError("--select-by protocol runs the command protocol: it needs an env "
                              "with a command ([env] task = \"command\")")  # fmt: skip
         self._check_schedule()
+        self._check_experts()
         self._check_start_curriculum()  # on the valid training env
         self._check_restart()
         self._check_stand_noise()
@@ -228,7 +236,44 @@ class PPOConfig:
     @property
     def pins_command(self) -> bool:
         """Whether the network reads the command and the hip speed in m/s (not normalised)."""
-        return self.stand_std_nm > 0 or self.stand_branch
+        return self.stand_std_nm > 0 or self.stand_branch or self.policy == "experts"
+
+    def obs_names(self) -> tuple[str, ...]:
+        """The names of the policy's observation entries, in order."""
+        from biped_constraint_env.observation import observation_names
+
+        return observation_names(self.settings().observation.blocks)
+
+    def pinned_entries(self) -> list[int]:
+        """The observation entries the normaliser holds at the identity (read as the env gives
+        them): the command and the hip's forward speed, and every entry an expert's gate reads.
+        """
+        from training.ppo.exploration import PINNED
+
+        names = self.obs_names()
+        out = {names.index(n) for n in PINNED}
+        if self.policy == "experts":
+            from training.ppo.experts import check_experts, gate_entries
+
+            out |= set(gate_entries(check_experts(self.experts, names)))
+        return sorted(out)
+
+    def _check_experts(self) -> None:
+        """Refuse ``[[experts]]`` that do not fit the policy or the env (ValueError)."""
+        from training.ppo.experts import check_experts
+
+        if (self.policy == "experts") != bool(self.experts):
+            raise ValueError("--policy experts and [[experts]] tables go together")
+        if not self.experts:
+            return
+        check_experts(self.experts, self.obs_names())
+        for name, on in (("stand_branch", self.stand_branch), ("stand_std_nm", self.stand_std_nm),
+                         ("use_sde", self.use_sde), ("teacher", self.teacher)):  # fmt: skip
+            if on:
+                raise ValueError(f"--policy experts does not combine with {name}")
+        if "command_m_s" not in self.obs_names() and self.stand_gamma > 0:
+            raise ValueError("--stand-gamma reads the command: it needs [env] task = "
+                             "\"command\"")  # fmt: skip
 
     def _check_stand_noise(self) -> None:
         """Refuse ``stand_std_nm`` or ``stand_branch`` where they mean nothing."""
@@ -250,8 +295,11 @@ class PPOConfig:
         if self.learn_rows != "all" and self.ent_coef != 0:
             raise ValueError("--learn-rows needs --ent-coef 0 (an entropy bonus moves every "
                              "actor's noise on every row)")  # fmt: skip
-        if self.stand_gamma > 0 and not self.stand_branch:
-            raise ValueError("--stand-gamma goes with --stand-branch")
+        if self.stand_gamma > 0 and not (self.stand_branch or self.policy == "experts"):
+            raise ValueError("--stand-gamma goes with --stand-branch or --policy experts")
+        if self.policy == "experts" and self.stand_gamma_rows == "branch" and self.stand_gamma:
+            raise ValueError("--stand-gamma with --policy experts holds where the command is 0: "
+                             "give --stand-gamma-rows zero_command")  # fmt: skip
         if self.stand_gamma_rows != "branch" and self.stand_gamma <= 0:
             raise ValueError("--stand-gamma-rows goes with --stand-gamma")
         if self.stand_gamma >= 1.0:
@@ -524,6 +572,10 @@ class PPOConfig:
         }
         if self.brake_branch:  # refused without stand_branch (StandBranchPolicy's option)
             kw["brake_branch"] = True
+        if self.policy == "experts":
+            from training.ppo.experts import check_experts
+
+            kw["experts"] = check_experts(self.experts, self.obs_names())
         if self.teacher:
             from training.ppo.imitation import FixedNormalizer
 
@@ -576,6 +628,7 @@ def _choices() -> dict[str, tuple]:
         "stand_gamma_rows": ("branch", "zero_command"),
         "learn_rows": ("all", "zero_command"),
         "activation": ACTIVATIONS,
+        "policy": ("mlp", "experts"),
     }
 
 

@@ -31,10 +31,11 @@ from biped_constraint_env.command import MAX_COMMAND_M_S
 from biped_constraint_env.observation import OBS_NAMES
 
 HIP_VY = OBS_NAMES.index("hip_vy")
-PINNED = {-1: MAX_COMMAND_M_S, HIP_VY: 8.0}
-"""The entries read in m/s (index: the largest magnitude a fold must pass unclipped): the
-command (the observation's last entry), and the hip's forward speed (a walk or a fall here
-stays well below 8 m/s)."""
+PINNED = {"command_m_s": MAX_COMMAND_M_S, "hip_vy": 8.0}
+"""The entries read in m/s (name: the largest magnitude a fold must pass unclipped): the
+command, and the hip's forward speed (a walk or a fall here stays well below 8 m/s)."""
+PINNED_INDEX = {-1: MAX_COMMAND_M_S, HIP_VY: 8.0}
+""":data:`PINNED` by index in the command task's observation (the command its last entry)."""
 
 
 def _pinned(v, indices: list[int], value: float) -> np.ndarray:
@@ -70,13 +71,15 @@ class PinnedStats(RunningMeanStd):
                    doc="The running variance (the pinned entries 1).")  # fmt: skip
 
 
-def pin_command(vecnorm, frozen: bool = False) -> None:
-    """Hold the :data:`PINNED` entries of ``vecnorm``'s observation statistics at the identity.
+def pin_command(vecnorm, entries, frozen: bool = False) -> None:
+    """Hold ``entries`` of ``vecnorm``'s observation statistics at the identity.
 
-    ``frozen``: hold the others where they are set too (the returns' statistics still move).
+    ``entries``: indices (``PPOConfig.pinned_entries``: :data:`PINNED` and the entries an
+    expert's gate reads); ``frozen``: hold the others where they are set too (the returns'
+    statistics still move).
     """
     old = vecnorm.obs_rms
-    stats = PinnedStats(old.mean.shape, list(PINNED), frozen)
+    stats = PinnedStats(old.mean.shape, list(entries), frozen)
     stats.mean, stats.var, stats.count = old.mean, old.var, old.count
     vecnorm.obs_rms = stats
 
@@ -173,7 +176,7 @@ def fold_pinned_inputs(
     folded.
     """
     todo = []
-    for i, bound in PINNED.items():
+    for i, bound in PINNED_INDEX.items():
         if mean[i] == 0.0 and (var[i] == 1.0 or var[i] < 1e-6):
             continue
         scale = float(np.sqrt(var[i] + eps))

@@ -577,7 +577,8 @@ class ObsNormalizer:
 def build_policy(cfg, observation_space=None):
     """A fresh SB3 ``ActorCriticPolicy`` (``MlpPolicy``) of the architecture in ``cfg``.
 
-    With ``cfg.stand_branch``, :class:`training.ppo.stand_branch.StandBranchPolicy`.
+    With ``cfg.stand_branch``, :class:`training.ppo.stand_branch.StandBranchPolicy`; with
+    ``cfg.policy = "experts"``, :class:`training.ppo.experts.ExpertsPolicy`.
 
     ``cfg``: a :class:`training.ppo.config.PPOConfig`. The action space is [-1, 1]^5 (the
     policy's actions, mapped to torques by ``cfg.action_map()``).
@@ -594,6 +595,8 @@ def build_policy(cfg, observation_space=None):
     cls = ActorCriticPolicy
     if cfg.stand_branch:
         from training.ppo.stand_branch import StandBranchPolicy as cls
+    elif cfg.policy == "experts":
+        from training.ppo.experts import ExpertsPolicy as cls
     return cls(
         observation_space, act_space, lambda _: 0.0, use_sde=cfg.use_sde, **cfg.policy_kwargs()
     )

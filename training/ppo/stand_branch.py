@@ -69,9 +69,9 @@ sensor noise) up a hundredfold and more, so the branch reads 0 for it, the value
 saw it at (the stander's foot rate: 0.002 rad/s there, 0.42 in a walk, 0.05 of sensor noise)."""
 
 
-def zero_command(obs: torch.Tensor) -> torch.Tensor:
-    """The rows of ``obs`` whose command (the last entry, in m/s) is exactly 0."""
-    return obs.float()[..., -1] == 0
+def zero_command(obs: torch.Tensor, entry: int = -1) -> torch.Tensor:
+    """The rows of ``obs`` whose command (entry ``entry``, in m/s) is exactly 0."""
+    return obs.float()[..., entry] == 0
 
 
 class InputMap(nn.Module):
@@ -289,13 +289,15 @@ DISCOUNT_ROWS = ("branch", "zero_command")
 """Where ``stand_gamma`` holds: the branch's rows, or every row whose command is 0."""
 
 
-def discount_gate(obs: torch.Tensor, rows: str = "branch") -> torch.Tensor:
+def discount_gate(obs: torch.Tensor, rows: str = "branch", command_entry: int = -1):
     """The rows discounted by ``stand_gamma``, a boolean per row of ``obs``.
 
     ``rows="branch"``: :meth:`StandBranchPolicy.gate`'s; ``"zero_command"``: every row whose
-    command (the last entry, in m/s) is exactly 0.
+    command (entry ``command_entry``, in m/s) is exactly 0.
     """
-    return StandBranchPolicy.gate(obs) if check_rows(rows) == "branch" else zero_command(obs)
+    if check_rows(rows) == "branch":
+        return StandBranchPolicy.gate(obs)
+    return zero_command(obs, command_entry)
 
 
 def check_rows(rows: str) -> str:
@@ -313,15 +315,18 @@ class BranchDiscountBuffer(RolloutBuffer):
     the run's ``gamma``; with the two equal this is SB3's GAE exactly.
     """
 
-    def __init__(self, *args, stand_gamma: float, rows: str = "branch", **kwargs):
+    def __init__(self, *args, stand_gamma: float, rows: str = "branch", command_entry: int = -1,
+                 **kwargs):  # fmt: skip
         super().__init__(*args, **kwargs)
         if not 0.0 < stand_gamma < 1.0:  # 1: a stander's value would grow without bound
             raise ValueError(f"stand_gamma must be in (0, 1), got {stand_gamma!r}")
         self.stand_gamma, self.rows = float(stand_gamma), check_rows(rows)
+        self.command_entry = int(command_entry)
 
     def step_gammas(self) -> np.ndarray:
         """The discount of every stored transition, (buffer_size, n_envs)."""
-        gate = discount_gate(torch.as_tensor(self.observations), self.rows).numpy()
+        obs = torch.as_tensor(self.observations)
+        gate = discount_gate(obs, self.rows, self.command_entry).numpy()
         return np.where(gate, self.stand_gamma, self.gamma).astype(np.float32)
 
     def compute_returns_and_advantage(self, last_values: torch.Tensor, dones: np.ndarray) -> None:
@@ -395,7 +400,8 @@ def truncation_discount(stand_gamma: float, rows: str = "branch"):
             dones, infos, rewards = (self.locals[k] for k in ("dones", "infos", "rewards"))
             if extra == 0 or not dones.any():
                 return True
-            gate = discount_gate(torch.as_tensor(m._last_obs), rows).numpy()
+            entry = getattr(m.rollout_buffer, "command_entry", -1)
+            gate = discount_gate(torch.as_tensor(m._last_obs), rows, entry).numpy()
             for i in np.flatnonzero(dones & gate):
                 info = infos[i]
                 if info.get("terminal_observation") is None or not info.get("TimeLimit.truncated"):
