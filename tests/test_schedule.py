@@ -172,3 +172,19 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     (run,) = (tmp_path / "runs" / "train_ppo").iterdir()
     eval_csv = (run / "eval.csv").read_text()
     assert "goals_met" in eval_csv and "/9" in eval_csv  # the protocol's nine goals were read
+    # the run's weights load as any policy (no code, no pickle) and act as the trained network
+    import numpy as np
+
+    from training.ppo.policy_io import ObsNormalizer, open_policy
+    from training.ppo.policy_io import main as policy_io
+
+    loaded, norm, saved_cfg, _, _ = open_policy(run, "final")
+    assert saved_cfg.schedule == ({**entry, "at": rollout + 1},)  # the run's own config
+    obs = np.random.default_rng(0).normal(size=(32, loaded.observation_space.shape[0]))
+    obs[::2, saved_cfg.obs_names().index("command_m_s")] = 0.0
+    x = ObsNormalizer(norm)(obs)
+    want, _ = model.policy.predict(x, deterministic=True)
+    got, _ = loaded.predict(x, deterministic=True)
+    np.testing.assert_array_equal(got, want)
+    pytest.importorskip("onnxruntime")  # the export checks onnxruntime's actions itself
+    assert policy_io(["export-onnx", str(run), str(tmp_path / "p.onnx")]) == 0

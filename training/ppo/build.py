@@ -55,9 +55,12 @@ def make_model(cfg: PPOConfig, vecnorm, run: Path, mean=None, var=None):
         from training.ppo.stand_branch import BranchDiscountBuffer
 
         extra["rollout_buffer_class"] = BranchDiscountBuffer
-        extra["rollout_buffer_kwargs"] = {"stand_gamma": cfg.stand_gamma,
-                                          "rows": cfg.stand_gamma_rows,
-                                          "command_entry": cfg.obs_names().index("command_m_s")}  # fmt: skip
+        entry = cfg.obs_names().index("command_m_s")
+        extra["rollout_buffer_kwargs"] = {
+            "stand_gamma": cfg.stand_gamma,
+            "rows": cfg.stand_gamma_rows,
+            "command_entry": entry,
+        }
     lr = cfg.learning_rate
     if cfg.lr_schedule == "linear":
         lr = LinearSchedule(cfg.learning_rate, 0.0, 1.0)

@@ -245,8 +245,10 @@ class PPOConfig:
         return observation_names(self.settings().observation.blocks)
 
     def pinned_entries(self) -> list[int]:
-        """The observation entries the normaliser holds at the identity (read as the env gives
-        them): the command and the hip's forward speed, and every entry an expert's gate reads.
+        """The observation entries the normaliser holds at the identity.
+
+        Read as the env gives them: the command and the hip's forward speed, and every entry
+        an expert's gate reads.
         """
         from training.ppo.exploration import PINNED
 

@@ -105,7 +105,7 @@ class ExpertsPolicy(RowPolicy):
         self.experts = tuple((n, tuple(map(tuple, g)), bool(c)) for n, g, c in experts)
         super().__init__(*args, **kwargs)
         if self.use_sde:
-            raise ValueError("policy = \"experts\" does not combine with use_sde")
+            raise ValueError('policy = "experts" does not combine with use_sde')
         self._which: torch.Tensor | None = None
         self._obs: torch.Tensor | None = None
 
