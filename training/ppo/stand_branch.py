@@ -396,11 +396,12 @@ def truncation_discount(stand_gamma: float, rows: str = "branch"):
     class TruncationDiscount(BaseCallback):
         def _on_step(self) -> bool:
             m = self.model
-            extra = getattr(m.rollout_buffer, "stand_gamma", stand_gamma) - m.gamma
+            buf = getattr(m, "rollout_buffer", None)  # the schedule's discount where it sets one
+            extra = getattr(buf, "stand_gamma", stand_gamma) - m.gamma
             dones, infos, rewards = (self.locals[k] for k in ("dones", "infos", "rewards"))
             if extra == 0 or not dones.any():
                 return True
-            entry = getattr(m.rollout_buffer, "command_entry", -1)
+            entry = getattr(buf, "command_entry", -1)
             gate = discount_gate(torch.as_tensor(m._last_obs), rows, entry).numpy()
             for i in np.flatnonzero(dones & gate):
                 info = infos[i]
