@@ -13,9 +13,9 @@ free bodies on the ground).
 The twin reports its state in the paper's terms, as a robot's estimator would: the stance leg
 and the model (1-4) estimated from which heel and toe touch (a point touches while its normal
 force exceeds :data:`CONTACT_ON_N` and stops once it has stayed below :data:`CONTACT_OFF_N` for
-:data:`CONTACT_RELEASE_S`: the hysteresis), the joint angles and rates in the current stance's numbering (theta0 the stance
-foot's angle, q1..q5 relative angles, :func:`~.hybrid.nb_renumber`'s convention), the stance
-toe's position and the points' normal forces. A completed step is a touchdown: the stance
+:data:`CONTACT_RELEASE_S`: the hysteresis), the joint angles and rates in the current
+stance's numbering (theta0 the stance foot's angle, q1..q5 relative angles,
+:func:`~.hybrid.nb_renumber`'s convention), the stance toe's position and the points' normal forces. A completed step is a touchdown: the stance
 leg's foot flat on the ground (heel and toe touching), the other foot than the last step's
 (or the start's); in the constraint model, the cycle's return from model 4 to model 1. The
 twin's feet may skip models 3 and 4 (a soft heel strike can unload the old toe at once) and a
@@ -143,8 +143,10 @@ def absolute_angles(q: np.ndarray, side: int) -> np.ndarray:
 
 
 def numbering(phi: np.ndarray, w: np.ndarray, side: int) -> tuple[np.ndarray, np.ndarray]:
-    """(q, qd) of the paper with leg ``side`` standing, from the physical links' directions
-    ``phi`` and rates ``w`` (foot A ... foot B)."""
+    """(q, qd) of the paper with leg ``side`` standing.
+
+    From the physical links' directions ``phi`` and rates ``w`` (foot A ... foot B).
+    """
     if side == 1:
         phi = np.array([phi[5 - j] + (0.0 if j in (0, 5) else math.pi) for j in range(N_LINKS)])
         w = w[::-1]
@@ -186,8 +188,10 @@ class Twin:
 
     # -------------------------------------------------------------- state
     def set_state(self, q, qd, side: int, root_y: float, mode: int) -> None:
-        """Start at the paper's state (``q``, ``qd`` in leg ``side``'s numbering, the stance
-        toe at ``root_y``, in model ``mode``); the estimate starts there."""
+        """Start at the paper's state; the estimate starts there.
+
+        ``q``, ``qd`` in leg ``side``'s numbering, the stance toe at ``root_y``, in ``mode``.
+        """
         mj = self.mujoco
         ch = self.params.chain(side).packed
         _, _, _, o, vo, _ = nb_forward_pass(ch, np.asarray(q, float), np.asarray(qd, float),
@@ -308,8 +312,11 @@ class Twin:
             self._estimate()
 
     def fallen(self, hip_height_m: float | None = None) -> bool:
-        """A fall: the hip below ``hip_height_m`` (default :data:`FALL_HIP_M`) or a knee at or
-        below the ground (a body other than the feet on the ground)."""
+        """A fall: the hip below ``hip_height_m`` or a knee at or below the ground.
+
+        ``hip_height_m``: default :data:`FALL_HIP_M`. A knee down is a body other than the
+        feet on the ground.
+        """
         z = self.data.xpos[self.joints, 2]  # the knees and the hip (joint origins)
         return bool(z[1] < (FALL_HIP_M if hip_height_m is None else hip_height_m) or
                     min(z[0], z[2]) <= 0.0)  # fmt: skip

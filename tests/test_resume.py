@@ -158,3 +158,17 @@ def test_interrupted_run_resumes_and_a_second_writer_is_refused(tmp_path):
     holder.stderr.close()
     assert train_ppo.main(["--resume", str(run), "--progress", "false"]) == 0
     assert load_state(run / "final")["num_timesteps"] >= total
+
+
+def test_a_session_killed_before_its_monitor_header_leaves_a_drawable_run(tmp_path):
+    """A session killed between creating its monitor file and SB3's header row leaves the
+    file empty: the learning curve (drawn at every run's end) reads the other sessions'."""
+    from training.plumbing.plots import learning_curve
+
+    (tmp_path / "0.monitor.csv").write_text(
+        '#{"t_start": 0, "env_id": "x"}\nr,l,t,steps_completed\n1.5,10,0.1,0\n2.5,20,0.2,1\n'
+    )
+    (tmp_path / "512.monitor.csv").write_text("")
+    (tmp_path / "1024.monitor.csv").write_text('#{"t_start": 0, "env_id": "x"}\n')
+    learning_curve(tmp_path, tmp_path / "curve.png")
+    assert (tmp_path / "curve.png").stat().st_size > 0

@@ -129,12 +129,13 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
 
     values = read_config_file(RECIPE)
     assert "init_from" not in values  # a random network to start
-    (entry,) = values["schedule"]
-    assert "perturbations" in entry["train_env"]
+    pushes, stop = values["schedule"]
+    assert "perturbations" in pushes["train_env"] and "stand" in stop["train_env"]["start"]
     rollout = 8 * 64
-    scaled = {**values, "schedule": [{**entry, "at": rollout + 1}], "n_envs": 8, "n_steps": 64,
-              "batch_size": 256, "total_timesteps": 4 * rollout, "eval_freq": 4 * rollout,
-              "eval_episodes": 1, "checkpoint_freq": 4 * rollout}  # fmt: skip
+    schedule = [{**pushes, "at": rollout + 1}, {**stop, "at": 3 * rollout}]
+    scaled = {**values, "schedule": schedule, "n_envs": 8, "n_steps": 64,
+              "batch_size": 256, "total_timesteps": 5 * rollout, "eval_freq": 5 * rollout,
+              "eval_episodes": 1, "checkpoint_freq": 5 * rollout}  # fmt: skip
     config = tmp_path / "recipe.toml"
     config.write_text(common.to_toml(replace(PPOConfig(), **{
         k: tuple(v) if isinstance(v, list) else v for k, v in scaled.items()})))  # fmt: skip
@@ -144,8 +145,17 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
 
     def recording_phase_env(cfg, seed, env_steps, env_threads=None):
         venv = phase_env(cfg, seed, env_steps, env_threads)
-        made.append((env_steps, venv.venv.settings.perturbations))
+        made.append((env_steps, venv.venv.settings))
         return venv
+
+    gammas: list = []
+    gamma_at = PPOConfig.gamma_at
+
+    def recording_gamma_at(self, env_steps):
+        gammas.append((env_steps, gamma_at(self, env_steps)))
+        return gammas[-1][1]
+
+    monkeypatch.setattr(PPOConfig, "gamma_at", recording_gamma_at)
 
     monkeypatch.setattr(build, "phase_env", recording_phase_env)
     models: list = []
@@ -159,9 +169,17 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     monkeypatch.setattr(train, "make_model", recording_make_model)
     assert train.main(["--config", str(config), "--out-dir", str(tmp_path / "runs"),
                        "--progress", "false"]) == 0  # fmt: skip
-    # the first phase's env from the start, the second's at the rollout that begins at 2 x 512
-    assert [n for n, _ in made] == [0, 2 * rollout]
-    assert made[0][1].push_impulse_ns is None and made[1][1].push_impulse_ns == (-1.0, 1.0)
+    # each phase's env from the first rollout at or after its step: 0, 2 x 512, 3 x 512
+    assert [n for n, _ in made] == [0, 2 * rollout, 3 * rollout]
+    (_, first), (_, pushed), (_, stopping) = made
+    assert first.perturbations.push_impulse_ns is None
+    assert pushed.perturbations.push_impulse_ns == stopping.perturbations.push_impulse_ns
+    assert pushed.perturbations.push_impulse_ns == (-1.0, 1.0)
+    assert first.command.zero_fraction == pushed.command.zero_fraction == 0.1
+    assert stopping.command.zero_fraction == 0.3 and stopping.reward.weights != first.reward.weights
+    # the discount before every rollout: the config's, then the stop phase's from 3 x 512
+    assert {g for n, g in gammas if n < 3 * rollout} == {values["gamma"]}
+    assert {g for n, g in gammas if n >= 3 * rollout} == {stop["gamma"]}
     ((model, initial),) = models
     assert isinstance(model.policy, ExpertsPolicy)
     assert [name for name, _, _ in model.policy.experts] == ["stand", "brake"]
@@ -179,7 +197,7 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     from training.ppo.policy_io import main as policy_io
 
     loaded, norm, saved_cfg, _, _ = open_policy(run, "final")
-    assert saved_cfg.schedule == ({**entry, "at": rollout + 1},)  # the run's own config
+    assert saved_cfg.schedule == tuple(schedule)  # the run's own config
     obs = np.random.default_rng(0).normal(size=(32, loaded.observation_space.shape[0]))
     obs[::2, saved_cfg.obs_names().index("command_m_s")] = 0.0
     x = ObsNormalizer(norm)(obs)

@@ -6,8 +6,8 @@ policy reads the observation the constraint env would compute from the twin's st
 paper's terms (the estimated model and stance leg, the joint angles and rates in that
 numbering, the hip, the normal forces; the contact clock and the command as the env's own
 parts give them), and its torques are held for the period. The twin has no strict contact
-checks: an episode ends at 30 s or at a fall (:meth:`~biped_constraint_env.twin.Twin.fallen`). A success is the walking success: at least 20 completed steps
-(model 4 -> 1 cycles of the estimate).
+checks: an episode ends at 30 s or at a fall (:meth:`~biped_constraint_env.twin.Twin.fallen`).
+A success is the walking success: at least 20 completed steps (the twin's touchdowns).
 
 ``python -m training.evaluation.sim_to_sim POLICY --start rest --episodes 200``: the success
 with its 95% interval, beside the constraint model's on the same seeds.
@@ -25,10 +25,13 @@ import numpy as np
 
 from training.plumbing.stats import MIN_STEPS, success
 
+
 def twin_episode(act, env_kwargs: dict, seed: int, episode_s: float = 30.0,
                  options=None, command: float | None = None) -> dict:  # fmt: skip
-    """One episode of ``act`` (obs (1, d) -> torques (1, 5) [N m]) in the twin, from the
-    constraint env's start for ``seed``."""
+    """One episode of ``act`` in the twin, from the constraint env's start for ``seed``.
+
+    ``act``: obs (1, d) -> torques (1, 5) [N m].
+    """
     import gymnasium as gym
 
     import biped_constraint_env  # noqa: F401

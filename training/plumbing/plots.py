@@ -135,6 +135,9 @@ def learning_curve(run: Path, path: Path) -> None:
     files = sorted((int(f.name.split(".")[0]), f) for f in names)
     mon, x = [], []
     for start, f in files:  # <start step>.monitor.csv of each session
+        with open(f, "rb") as fh:
+            if fh.read(1 << 16).count(b"\n") < 2:  # no header row: a session killed at its start
+                continue
         rows = read_csv(f, {"r": float, "l": int, "steps_completed": int}, run, comment_lines=1)
         x.extend(start + np.cumsum([r["l"] for r in rows]))
         mon.extend(rows)
