@@ -15,11 +15,12 @@ and the model (1-4) estimated from which heel and toe touch (a point touches whi
 force exceeds :data:`CONTACT_ON_N` and stops once it has stayed below :data:`CONTACT_OFF_N` for
 :data:`CONTACT_RELEASE_S`: the hysteresis), the joint angles and rates in the current
 stance's numbering (theta0 the stance foot's angle, q1..q5 relative angles,
-:func:`~.hybrid.nb_renumber`'s convention), the stance toe's position and the points' normal forces. A completed step is a touchdown: the stance
-leg's foot flat on the ground (heel and toe touching), the other foot than the last step's
-(or the start's); in the constraint model, the cycle's return from model 4 to model 1. The
-twin's feet may skip models 3 and 4 (a soft heel strike can unload the old toe at once) and a
-contact may chatter, which neither counts a step nor changes the alternation.
+:func:`~.hybrid.nb_renumber`'s convention), the stance toe's position and the points'
+normal forces. A completed step is a touchdown: the stance leg's foot flat on the ground (heel
+and toe touching), the other foot than the last step's (or the start's); in the constraint
+model, the cycle's return from model 4 to model 1. The twin's feet may skip models 3 and 4 (a
+soft heel strike can unload the old toe at once) and a contact may chatter, which neither
+counts a step nor changes the alternation.
 
 Requires MuJoCo (the ``bench`` extra: ``pip install -e ".[bench]"``).
 """
