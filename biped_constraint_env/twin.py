@@ -73,12 +73,14 @@ class TwinOptions:
     point_radius_m: float = 0.005
 
 
-def twin_mjcf(params: BipedParams, options: TwinOptions = TwinOptions()) -> str:
+def twin_mjcf(params: BipedParams, options: TwinOptions = TwinOptions(), weld: bool = False) -> str:
     """The MJCF text of the twin of ``params`` (leg A's numbering, the base at foot A's ankle).
 
     Each body's local +y axis is its link's direction (u(phi) = (cos phi, sin phi) in y-z), its
     hinge about +x at the body's origin (the link's proximal joint), so that the hinge angles
     are the paper's q1..q5 with leg A standing and the base's pitch is foot A's angle.
+    ``weld``: foot A fixed flat to the world, no contact, MuJoCo's RK4 (the constraint
+    model's model 1, for validation).
     """
     ch = params.chain(0).packed
     lengths = [link.length_m for link in params.links]
@@ -118,13 +120,17 @@ def twin_mjcf(params: BipedParams, options: TwinOptions = TwinOptions()) -> str:
     base = ('<joint name="base_y" type="slide" axis="0 1 0" limited="false"/>'
             '<joint name="base_z" type="slide" axis="0 0 1" limited="false"/>'
             '<joint name="base_pitch" type="hinge" axis="1 0 0" limited="false"/>')  # fmt: skip
+    if weld:
+        base = ""
     foot_a = (f'<body name="foot_a">{base}{inertial(0, 0.0)}{points("a", 0.5 * lengths[0])}'
               f'{body}</body>')  # fmt: skip
     motors = "".join(f'<motor name="m{i}" joint="q{i}" gear="1"/>' for i in range(1, 6))
+    flag = '<flag contact="disable"/>' if weld else ""
     return (
         '<mujoco model="biped_twin">'
         f'<option timestep="{options.timestep_s:.17g}" gravity="0 {gy:.17g} {gz:.17g}" '
-        'integrator="Euler" cone="pyramidal"/>'
+        f'integrator="{"RK4" if weld else "Euler"}" cone="pyramidal">'
+        f"{flag}</option>"
         "<worldbody>"
         f'<geom name="ground" type="plane" size="0 0 1" pos="0 0 {-r:.17g}" {contact}/>'
         f"{foot_a}</worldbody><actuator>{motors}</actuator></mujoco>"
