@@ -10,7 +10,8 @@ checks: an episode ends at 30 s or at a fall (:meth:`~biped_constraint_env.twin.
 A success is the walking success: at least 20 completed steps (the twin's touchdowns).
 
 ``python -m training.evaluation.sim_to_sim POLICY --start rest --episodes 200``: the success
-with its 95% interval, beside the constraint model's on the same seeds.
+with its 95% interval in the twin, beside the constraint model's on the same seeds (its own
+batched env, strict checks).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from training.plumbing.stats import MIN_STEPS, success
+from training.plumbing.stats import success
 
 
 def twin_episode(act, env_kwargs: dict, seed: int, episode_s: float = 30.0,
@@ -95,6 +96,21 @@ def twin_episode(act, env_kwargs: dict, seed: int, episode_s: float = 30.0,
             "t_s": round(t, 3), "distance_m": float(hip[0] - y0)}  # fmt: skip
 
 
+def constraint_episodes(act, env_kwargs: dict, seeds, command: float | None = None) -> list:
+    """The same seeds' episodes in the constraint model (the batched env, strict checks).
+
+    With ``command``, held from the reset
+    (:func:`~training.plumbing.command_protocol.run_commanded`).
+    """
+    if command is None:
+        from training.plumbing.rollouts import run_episodes_batched
+
+        return run_episodes_batched(act, env_kwargs, seeds)
+    from training.plumbing.command_protocol import run_commanded
+
+    return run_commanded(act, env_kwargs, seeds, lambda t, k: np.full(len(t), command), 30.0)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run a policy in the twin on report seeds; print and write the success."""
     from training.plumbing.common import command
@@ -110,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("policy", type=Path)
     ap.add_argument("--start", default=None, help="the env's start (default: the policy's)")
     ap.add_argument("--episodes", type=int, default=200)
-    ap.add_argument("--seed", type=int, default=REPORT_SEED_OFFSET)
+    ap.add_argument("--seed", type=int, default=REPORT_SEED_OFFSET, help="the first seed")
     ap.add_argument("--command", type=float, default=None, help="a held command [m/s]")
     ap.add_argument("--out", type=Path, default=None, help="write the episodes here (JSON)")
 
@@ -123,13 +139,16 @@ def main(argv: list[str] | None = None) -> int:
         if a.start is not None:
             kw = {**kw, "start": a.start}
         t0 = time.time()
-        eps = [twin_episode(act, kw, a.seed + k, command=a.command) for k in range(a.episodes)]
-        res = success([e["steps_completed"] for e in eps])
-        ends = Counter(e["end"] for e in eps)
-        print(json.dumps({"policy": str(a.policy), "start": kw.get("start"), "success": res,
-                          "steps_mean": float(np.mean([e["steps_completed"] for e in eps])),
-                          "ends": dict(ends), "wall_s": round(time.time() - t0, 1),
-                          "min_steps": MIN_STEPS}, indent=1))  # fmt: skip
+        seeds = range(a.seed, a.seed + a.episodes)
+        eps = [twin_episode(act, kw, s, command=a.command) for s in seeds]
+        ref = constraint_episodes(act, kw, seeds, a.command)
+        out = {"policy": str(a.policy), "start": kw.get("start"), "command": a.command,
+               "seeds": [a.seed, a.seed + a.episodes - 1], "wall_s": round(time.time() - t0, 1)}
+        for name, rows in (("twin", eps), ("constraint", ref)):
+            out[name] = {"success": success([e["steps_completed"] for e in rows]),
+                         "steps_mean": float(np.mean([e["steps_completed"] for e in rows])),
+                         "ends": dict(Counter(e["end"] for e in rows))}  # fmt: skip
+        print(json.dumps(out, indent=1))
         if a.out is not None:
             a.out.write_text(json.dumps(eps, indent=1) + "\n")
         return 0
