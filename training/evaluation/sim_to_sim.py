@@ -142,8 +142,13 @@ def main(argv: list[str] | None = None) -> int:
         seeds = range(a.seed, a.seed + a.episodes)
         eps = [twin_episode(act, kw, s, command=a.command) for s in seeds]
         ref = constraint_episodes(act, kw, seeds, a.command)
-        out = {"policy": str(a.policy), "start": kw.get("start"), "command": a.command,
-               "seeds": [a.seed, a.seed + a.episodes - 1], "wall_s": round(time.time() - t0, 1)}
+        out = {
+            "policy": str(a.policy),
+            "start": kw.get("start"),
+            "command": a.command,
+            "seeds": [a.seed, a.seed + a.episodes - 1],
+            "wall_s": round(time.time() - t0, 1),
+        }
         for name, rows in (("twin", eps), ("constraint", ref)):
             out[name] = {"success": success([e["steps_completed"] for e in rows]),
                          "steps_mean": float(np.mean([e["steps_completed"] for e in rows])),
