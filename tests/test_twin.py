@@ -97,3 +97,30 @@ def test_the_toe_pivots_damping_is_the_papers_and_a_weld_has_no_ground():
     twin = Twin(params)
     assert twin.toe_damping == params.links[0].damping_nms_per_rad
     assert 'type="plane"' in twin_mjcf(params) and "base_y" not in twin_mjcf(params, weld=True)
+
+
+def test_a_policy_runs_in_the_twin_from_the_constraint_envs_start():
+    """The driver's episode: the constraint env's start for the seed, the policy's own env
+    options, its observation computed from the twin's state as the env computes it."""
+    from training.evaluation.sim_to_sim import twin_episode
+    from training.ppo.policy_io import (
+        ObsNormalizer,
+        open_policy,
+        policy_batch_actor,
+        published_snapshot,
+    )
+
+    src = "policies/ppo_command_stop_50hz"
+    policy, norm, cfg, _, _ = open_policy(src, published_snapshot(src)[0])
+    seen = []
+
+    def act(obs):
+        seen.append(obs.copy())
+        return policy_batch_actor(policy, ObsNormalizer(norm), cfg)(obs)
+
+    ep = twin_episode(act, {**cfg.env_kwargs(), "start": "rest"}, 700_000, 2.0, command=1.0)
+    assert ep["end"] == "time_limit" and ep["t_s"] == pytest.approx(2.0)
+    assert len(seen) == 100 and seen[0].shape == (1, cfg.obs_dim())
+    names = cfg.obs_names()
+    assert {o[0, names.index("command_m_s")] for o in seen} == {1.0}
+    assert ep["distance_m"] > 0.5  # it walks off
