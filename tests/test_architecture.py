@@ -33,6 +33,7 @@ LAYERS = [
     "stepper",
     "advance",
     "simulator",
+    "twin",
     "render",
     "tasks",
     "actions",
