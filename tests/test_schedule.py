@@ -206,3 +206,28 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     np.testing.assert_array_equal(got, want)
     pytest.importorskip("onnxruntime")  # the export checks onnxruntime's actions itself
     assert policy_io(["export-onnx", str(run), str(tmp_path / "p.onnx")]) == 0
+
+
+def test_a_scheduled_learning_rate_is_adams_from_its_step_under_the_runs_decay():
+    """SB3 sets Adam's rate from the model's schedule before each update: a scheduled rate
+    replaces the config's from its step, decayed as the config's would be."""
+    from types import SimpleNamespace as NS
+
+    from stable_baselines3.common.utils import LinearSchedule
+
+    from training.ppo.callbacks import gamma_schedule
+
+    cfg = _cfg(learning_rate=3e-4, lr_schedule="linear", total_timesteps=1_000_000,
+               schedule=({"at": 500_000, "learning_rate": 1e-5},))  # fmt: skip
+    assert cfg.learning_rate_at(250_000) == pytest.approx(LinearSchedule(3e-4, 0.0, 1.0)(0.75))
+    assert cfg.learning_rate_at(600_000) == pytest.approx(1e-5 * 0.4)
+    vecnorm = NS(gamma=0.0)
+    model = NS(num_timesteps=0, gamma=0.0, rollout_buffer=NS(gamma=0.0), lr_schedule=None,
+               logger=NS(record=lambda *a: None), get_env=lambda: None)  # fmt: skip
+    cb = gamma_schedule(cfg, vecnorm)
+    cb.init_callback(model)
+    for steps, want in ((100_000, 3e-4 * 0.9), (750_000, 1e-5 * 0.25)):
+        model.num_timesteps = steps
+        cb.on_rollout_start()
+        cb.on_rollout_end()
+        assert model.lr_schedule(0.123) == pytest.approx(want)

@@ -75,13 +75,14 @@ def critic_warmup(cfg: PPOConfig, anchor=None):
 
 
 def gamma_schedule(cfg: PPOConfig, vecnorm):
-    """A callback: before every rollout the discounts the config gives at that env step.
+    """A callback: before every rollout the discounts (and rate) the config gives at that step.
 
     :meth:`PPOConfig.gamma_at`, set where SB3 reads it: the algorithm (bootstrapping at
     truncation), its rollout buffer (GAE) and the reward normaliser's running return; with a
     standing discount, :meth:`PPOConfig.stand_gamma_at` in the rollout buffer
     (:class:`training.ppo.stand_branch.BranchDiscountBuffer`, which the truncation bootstrap
-    reads too).
+    reads too); where a ``[[schedule]]`` entry sets a learning rate,
+    :meth:`PPOConfig.learning_rate_at` as the model's schedule (SB3 sets Adam's rate from it).
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -99,7 +100,22 @@ def gamma_schedule(cfg: PPOConfig, vecnorm):
                 buf.stand_gamma = cfg.stand_gamma_at(t)
                 self.logger.record("train/stand_gamma", buf.stand_gamma)
 
+        def _on_rollout_end(self) -> None:  # SB3 sets Adam's rate from this before the update
+            if lr:  # at the update's step count, as SB3's own schedule reads it
+                self.model.lr_schedule = _Constant(cfg.learning_rate_at(self.model.num_timesteps))
+
+    lr = any("learning_rate" in e for e in cfg.schedule)
     return GammaSchedule()
+
+
+class _Constant:
+    """A learning-rate schedule of one value (what SB3 calls with the progress remaining)."""
+
+    def __init__(self, value: float):
+        self.value = float(value)
+
+    def __call__(self, _progress_remaining: float) -> float:
+        return self.value
 
 
 def env_schedule(cfg: PPOConfig, vecnorm, seed: int, phase: int):

@@ -42,10 +42,11 @@ class PPOConfig:
     # 100 training episodes reaches `until_episode_s` [s], then from [train_env]'s start
     # ({}: none; the switch is saved with the checkpoint)
     schedule: tuple[dict, ...] = ()  # [[schedule]] tables (config file only), each
-    # {at = ENV_STEPS, train_env = {...}, gamma = X, stand_gamma = X}: from the first rollout
-    # at or after `at` env steps, its train_env keys replace those in force (every training
-    # row starts again in that env) and its discounts the run's; entries in increasing `at`,
-    # each holding until the next (stages inside one run; PPOConfig.phase_at)
+    # {at = ENV_STEPS, train_env = {...}, gamma = X, stand_gamma = X, learning_rate = X}: from
+    # the first rollout at or after `at` env steps, its train_env keys replace those in force
+    # (every training row starts again in that env), its discounts and learning rate (under
+    # the run's lr_schedule) the run's; entries in increasing `at`, each holding until the next
+    # (stages inside one run; PPOConfig.phase_at)
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
@@ -337,7 +338,7 @@ class PPOConfig:
             if on:
                 raise ValueError(f"{flag} does not combine with {name}")
 
-    SCHEDULE_KEYS = ("at", "train_env", "gamma", "stand_gamma")
+    SCHEDULE_KEYS = ("at", "train_env", "gamma", "stand_gamma", "learning_rate")
 
     def _check_schedule_entries(self) -> None:
         """Refuse a ``[[schedule]]`` entry with a wrong key or value (ValueError naming it)."""
@@ -357,7 +358,8 @@ class PPOConfig:
                 raise ValueError(f"{where}: at must be a whole number of env steps above the "
                                  f"entry before's ({last}), got {at!r}")  # fmt: skip
             last = at
-            for name, lo, hi in (("gamma", 0.0, 1.0), ("stand_gamma", 0.0, 0.999999)):
+            for name, lo, hi in (("gamma", 0.0, 1.0), ("stand_gamma", 0.0, 0.999999),
+                                 ("learning_rate", 0.0, 1.0)):  # fmt: skip
                 v = e.get(name)
                 if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
                                       or not lo < v <= hi):  # fmt: skip
@@ -406,6 +408,17 @@ class PPOConfig:
             if name in e:
                 return e[name]
         return default
+
+    def learning_rate_at(self, env_steps: int) -> float:
+        """Adam's learning rate at ``env_steps``.
+
+        :attr:`learning_rate`, or a schedule's, times the run's linear decay (``lr_schedule =
+        "linear"``: 1 - env_steps / total).
+        """
+        lr = float(self._scheduled("learning_rate", env_steps, self.learning_rate))
+        if self.lr_schedule == "linear":
+            lr *= max(0.0, 1.0 - env_steps / max(self.total_timesteps, 1))
+        return lr
 
     def stand_gamma_at(self, env_steps: int) -> float:
         """The standing rows' discount at ``env_steps`` (:attr:`stand_gamma`, or a schedule's)."""

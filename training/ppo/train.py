@@ -504,7 +504,8 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
 
         branch_discount = truncation_discount(cfg.stand_gamma, cfg.stand_gamma_rows)
     schedules = []  # what changes with the env step: the discounts, the training env
-    if cfg.gamma_final > 0 or any({"gamma", "stand_gamma"} & set(e) for e in cfg.schedule):
+    if cfg.gamma_final > 0 or any({"gamma", "stand_gamma", "learning_rate"} & set(e)
+                                  for e in cfg.schedule):  # fmt: skip
         schedules.append(gamma_schedule(cfg, vecnorm))
     if any("train_env" in e for e in cfg.schedule):
         phase = cfg.phase_at(model.num_timesteps)
