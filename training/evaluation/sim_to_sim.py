@@ -97,7 +97,7 @@ def twin_episode(act, env_kwargs: dict, seed: int, episode_s: float = 30.0,
 
 
 def constraint_episodes(act, env_kwargs: dict, seeds, command: float | None = None) -> list:
-    """The same seeds' episodes in the constraint model (the batched env, strict checks).
+    """The same seeds' 30 s episodes in the constraint model (the batched env, strict checks).
 
     With ``command``, held from the reset
     (:func:`~training.plumbing.command_protocol.run_commanded`).
@@ -105,7 +105,7 @@ def constraint_episodes(act, env_kwargs: dict, seeds, command: float | None = No
     if command is None:
         from training.plumbing.rollouts import run_episodes_batched
 
-        return run_episodes_batched(act, env_kwargs, seeds)
+        return run_episodes_batched(act, env_kwargs, seeds, episode_s=30.0)
     from training.plumbing.command_protocol import run_commanded
 
     return run_commanded(act, env_kwargs, seeds, lambda t, k: np.full(len(t), command), 30.0)
