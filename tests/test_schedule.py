@@ -190,6 +190,10 @@ def test_the_command_recipe_trains_from_random_weights_with_its_schedule_in_effe
     (run,) = (tmp_path / "runs" / "train_ppo").iterdir()
     eval_csv = (run / "eval.csv").read_text()
     assert "goals_met" in eval_csv and "/9" in eval_csv  # the protocol's nine goals were read
+    import json
+
+    assert "the command protocol's goals met" in json.loads(
+        (run / "published.json").read_text())["why"]  # fmt: skip
     # the run's weights load as any policy (no code, no pickle) and act as the trained network
     import numpy as np
 

@@ -116,9 +116,9 @@ def publish(cfg: PPOConfig, run: OutDir, ended: str = "") -> None:
     """
     if available(run.path, "best"):
         st = load_state(open_snapshot(run.path, "best"))
-        by = {"min": "the fewest steps of", "return": "the mean return over"}.get(
-            cfg.select_by, "the mean steps over"
-        )
+        by = {"min": "the fewest steps of", "return": "the mean return over",
+              "protocol": "the command protocol's goals met (then how close it came to the "
+                          "rest) on"}.get(cfg.select_by, "the mean steps over")  # fmt: skip
         more = (f", {cfg.stop_confirm_episodes} more where all met the stop criterion"
                 if cfg.stop_confirm_episodes > 0 and cfg.stop_min_steps > 0 else "")  # fmt: skip
         why = (
