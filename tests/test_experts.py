@@ -111,3 +111,44 @@ def test_the_gate_entries_are_read_as_the_env_gives_them():
         assert not np.allclose(vecnorm.obs_rms.mean, 0)  # the other entries are normalised
     finally:
         vecnorm.close()
+
+
+def test_a_schedule_copies_an_actor_once_and_freezes_actors_from_its_step(tmp_path):
+    from training.ppo.build import make_model, training_env
+    from training.ppo.callbacks import actor_schedule
+    from training.ppo.experts import actor_parameters
+
+    entry = {"at": 10, "copy": {"brake": "walk"}, "frozen": ["walk"]}
+    cfg = _cfg(n_envs=2, n_steps=8, batch_size=16, schedule=(entry,))
+    _, vecnorm = training_env(cfg, 0)
+    try:
+        model = make_model(cfg, vecnorm, tmp_path)
+        p = model.policy
+        cb = actor_schedule(cfg, 0)
+        cb.init_callback(model)
+        cb.on_training_start({}, {})
+        assert all(q.requires_grad for q in p.parameters())
+        walk, brake = actor_parameters(p, "walk"), actor_parameters(p, "brake")
+        assert not all(torch.equal(a, b) for a, b in zip(walk, brake, strict=True))
+        model.num_timesteps = 10
+        cb.on_rollout_start()
+        assert all(torch.equal(a, b) for a, b in zip(walk, brake, strict=True))
+        assert not any(q.requires_grad for q in walk) and all(q.requires_grad for q in brake)
+        with torch.no_grad():
+            brake[0].add_(1.0)  # learning on: a later rollout copies nothing again
+        model.num_timesteps = 20
+        cb.on_rollout_start()
+        assert not torch.equal(walk[0], brake[0])
+        resumed = actor_schedule(cfg, 1)  # a session that starts in the entry's phase
+        resumed.init_callback(model)
+        p.log_std.requires_grad_(True)
+        resumed.on_training_start({}, {})
+        assert not p.log_std.requires_grad and not torch.equal(walk[0], brake[0])  # no copy
+    finally:
+        vecnorm.close()
+    for bad, match in (({"copy": {"brake": "nobody"}}, "copy must be"),
+                       ({"frozen": ["stand", "x"]}, "frozen must be")):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            _cfg(schedule=({"at": 5, **bad},))
+    with pytest.raises(ValueError, match="need --policy experts"):
+        PPOConfig(env={"task": "command"}, schedule=({"at": 5, "frozen": ["walk"]},)).validate()

@@ -118,6 +118,44 @@ class _Constant:
         return self.value
 
 
+def actor_schedule(cfg: PPOConfig, phase: int):
+    """A callback: the ``[[schedule]]`` entries' ``copy`` and ``frozen`` on the experts' actors.
+
+    ``frozen``: the list in force (the last entry begun that gives one) holds from the run's
+    start in this session and from each entry's first rollout; ``copy``: done once, at the
+    first rollout of its entry's phase within a session (a resumed run's weights hold it
+    already). ``phase``: the phase the run is in when this session starts.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from training.ppo.experts import copy_actor, set_frozen
+
+    class ActorSchedule(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.phase = phase
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_training_start(self) -> None:
+            set_frozen(self.model.policy, cfg._scheduled("frozen", self.model.num_timesteps, ()))
+
+        def _on_rollout_start(self) -> None:
+            t = self.model.num_timesteps
+            k = cfg.phase_at(t)
+            for e in cfg.schedule[self.phase : k]:
+                for dst, src in e.get("copy", {}).items():
+                    copy_actor(self.model.policy, dst, src)
+                    print(f"[schedule] {t} env steps: the {dst} actor starts as a copy of the "
+                          f"{src} actor", flush=True)  # fmt: skip
+            if k != self.phase:
+                set_frozen(self.model.policy, cfg._scheduled("frozen", t, ()))
+            self.phase = k
+
+    return ActorSchedule()
+
+
 def env_schedule(cfg: PPOConfig, vecnorm, seed: int, phase: int):
     """A callback: the training env of each ``[[schedule]]`` phase, from its first rollout.
 

@@ -42,11 +42,13 @@ class PPOConfig:
     # 100 training episodes reaches `until_episode_s` [s], then from [train_env]'s start
     # ({}: none; the switch is saved with the checkpoint)
     schedule: tuple[dict, ...] = ()  # [[schedule]] tables (config file only), each
-    # {at = ENV_STEPS, train_env = {...}, gamma = X, stand_gamma = X, learning_rate = X}: from
-    # the first rollout at or after `at` env steps, its train_env keys replace those in force
-    # (every training row starts again in that env), its discounts and learning rate (under
-    # the run's lr_schedule) the run's; entries in increasing `at`, each holding until the next
-    # (stages inside one run; PPOConfig.phase_at)
+    # {at = ENV_STEPS, train_env = {...}, gamma = X, stand_gamma = X, learning_rate = X,
+    # copy = {EXPERT = EXPERT}, frozen = [EXPERT, ...]}: from the first rollout at or after
+    # `at` env steps, its train_env keys replace those in force (every training row starts
+    # again in that env), its discounts and learning rate (under the run's lr_schedule) the
+    # run's; with policy "experts", the actors it names in copy start there as copies of
+    # others', and those in frozen stop learning (until an entry gives another list); entries
+    # in increasing `at`, each holding until the next (stages inside one run; phase_at)
     train_episode_s: float = 0.0  # > 0: training episodes end (truncated) after this [s];
     # SB3 bootstraps the value there; evaluation keeps the env's 30 s
     seed: int = 0  # drives the network's initialisation, the training starts and the demos
@@ -338,7 +340,8 @@ class PPOConfig:
             if on:
                 raise ValueError(f"{flag} does not combine with {name}")
 
-    SCHEDULE_KEYS = ("at", "train_env", "gamma", "stand_gamma", "learning_rate")
+    SCHEDULE_KEYS = ("at", "train_env", "gamma", "stand_gamma", "learning_rate", "copy",
+                     "frozen")  # fmt: skip
 
     def _check_schedule_entries(self) -> None:
         """Refuse a ``[[schedule]]`` entry with a wrong key or value (ValueError naming it)."""
@@ -369,6 +372,20 @@ class PPOConfig:
                                  f"give one")  # fmt: skip
             if "stand_gamma" in e and self.stand_gamma <= 0:
                 raise ValueError(f"{where}: stand_gamma needs the run's --stand-gamma (> 0)")
+            if ("copy" in e or "frozen" in e) and self.policy != "experts":
+                raise ValueError(f"{where}: copy and frozen name experts: they need --policy "
+                                 f"experts")  # fmt: skip
+            names = ["walk", *(x.get("name") for x in self.experts if isinstance(x, dict))]
+            copy = e.get("copy", {})
+            if not isinstance(copy, dict) or any(
+                d not in names or src not in names or d == src for d, src in copy.items()
+            ):
+                raise ValueError(f"{where}: copy must be a table of expert = the expert it "
+                                 f"starts as a copy of, over {names}, got {copy!r}")  # fmt: skip
+            frozen = e.get("frozen", [])
+            if not isinstance(frozen, list | tuple) or any(n not in names for n in frozen):
+                raise ValueError(f"{where}: frozen must be a list of experts of {names}, "
+                                 f"got {frozen!r}")  # fmt: skip
             if "train_env" in e:
                 if not isinstance(e["train_env"], dict) or not e["train_env"]:
                     raise ValueError(f"{where}: train_env must be a table of [train_env] keys")

@@ -174,3 +174,31 @@ class ExpertsPolicy(RowPolicy):
             mean = torch.where(rows, self.heads[k - 1](self.actors[k - 1](self._obs)), mean)
             log_std = torch.where(rows, self.log_stds[k - 1], log_std)
         return self.action_dist.proba_distribution(mean, log_std)
+
+
+def actor_parameters(policy: ExpertsPolicy, name: str) -> list:
+    """The parameters of expert ``name``'s actor: its MLP, action head and learned log-std."""
+    if name == "walk":
+        return [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters(),
+                policy.log_std]  # fmt: skip
+    k = [n for n, _, _ in policy.experts].index(name)
+    return [*policy.actors[k].parameters(), *policy.heads[k].parameters(), policy.log_stds[k]]
+
+
+def copy_actor(policy: ExpertsPolicy, dst: str, src: str) -> None:
+    """Expert ``dst``'s actor set to a copy of ``src``'s (in place).
+
+    Adam forgets ``dst``'s moments, so its next steps are a new start's.
+    """
+    with torch.no_grad():
+        for d, s in zip(actor_parameters(policy, dst), actor_parameters(policy, src), strict=True):
+            d.copy_(s)
+            policy.optimizer.state.pop(d, None)
+
+
+def set_frozen(policy: ExpertsPolicy, names) -> None:
+    """The actors of ``names`` do not learn (no gradient reaches them); every other one does."""
+    names = set(names)
+    for name in ["walk", *(n for n, _, _ in policy.experts)]:
+        for q in actor_parameters(policy, name):
+            q.requires_grad_(name not in names)

@@ -43,6 +43,7 @@ from training.plumbing.outputs import OutDir, RunLock, check_tree
 from training.plumbing.safe_files import read_npz
 from training.ppo.build import initial_actions, make_model, training_env
 from training.ppo.callbacks import (
+    actor_schedule,
     check_restart_checked,
     check_restarts,
     critic_warmup,
@@ -507,6 +508,8 @@ def _train(cfg: PPOConfig, run: OutDir, venv, vecnorm, checkpoint, extend: bool)
     if cfg.gamma_final > 0 or any({"gamma", "stand_gamma", "learning_rate"} & set(e)
                                   for e in cfg.schedule):  # fmt: skip
         schedules.append(gamma_schedule(cfg, vecnorm))
+    if any({"copy", "frozen"} & set(e) for e in cfg.schedule):
+        schedules.append(actor_schedule(cfg, cfg.phase_at(model.num_timesteps)))
     if any("train_env" in e for e in cfg.schedule):
         phase = cfg.phase_at(model.num_timesteps)
         schedules.append(env_schedule(cfg, vecnorm, TRAIN_SEED_OFFSET + cfg.seed, phase))
