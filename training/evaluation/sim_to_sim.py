@@ -128,7 +128,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=200)
     ap.add_argument("--seed", type=int, default=REPORT_SEED_OFFSET, help="the first seed")
     ap.add_argument("--command", type=float, default=None, help="a held command [m/s]")
-    ap.add_argument("--out", type=Path, default=None, help="write the episodes here (JSON)")
 
     @command("sim_to_sim")
     def run(a) -> int:
@@ -153,9 +152,7 @@ def main(argv: list[str] | None = None) -> int:
             out[name] = {"success": success([e["steps_completed"] for e in rows]),
                          "steps_mean": float(np.mean([e["steps_completed"] for e in rows])),
                          "ends": dict(Counter(e["end"] for e in rows))}  # fmt: skip
-        print(json.dumps(out, indent=1))
-        if a.out is not None:
-            a.out.write_text(json.dumps(eps, indent=1) + "\n")
+        print(json.dumps(out, indent=1))  # writes nothing: the rows go to standard output
         return 0
 
     return run(ap.parse_args(argv))
